@@ -1,0 +1,38 @@
+# nearopt: `make run` sets everything up and plans the paper's example; `make test` sets everything
+# up and runs the whole test suite. Both work from a clean clone on a machine with Python 3.11,
+# make and apt (as root); everything else is installed here, into .venv/.
+
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+STAMP  := $(VENV)/.installed
+
+.PHONY: setup run test bench clean
+
+setup: $(STAMP)
+
+# A Debian python3 may lack venv/ensurepip: install python3-venv with apt when it does.
+$(BIN)/python:
+	@$(PYTHON) -c 'import sys; assert sys.version_info >= (3, 11), sys.version' || \
+	  { echo "nearopt needs Python >= 3.11 as $(PYTHON)"; exit 1; }
+	@$(PYTHON) -m venv $(VENV) 2>/dev/null || { \
+	  rm -rf $(VENV); \
+	  apt-get update -qq && apt-get install -y -qq python3-venv >/dev/null && \
+	  $(PYTHON) -m venv $(VENV); }
+	$(BIN)/python -m pip install -q --upgrade pip
+
+$(STAMP): pyproject.toml | $(BIN)/python
+	$(BIN)/python -m pip install -q -e '.[test,bench,viz]'
+	@touch $(STAMP)
+
+run: setup
+	$(BIN)/python scripts/01_paper_example.py
+
+test: setup
+	$(BIN)/python -m pytest
+
+bench: setup
+	$(BIN)/python scripts/bench_dynamics.py
+
+clean:
+	rm -rf $(VENV) out .pytest_cache

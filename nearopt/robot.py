@@ -1,0 +1,722 @@
+"""The robot layer: a URDF arm on Pinocchio, with the quantities of the paper's eq. (1).
+
+Notation (used throughout nearopt):
+
+- θ ∈ ℝⁿ joint positions [rad or m], θ̇, θ̈ their time derivatives;
+- u ∈ ℝⁿ actuator torques / forces [N·m or N];
+- the dynamics of eq. (1), H(θ)θ̈ + h(θ, θ̇) + g(θ) + Dθ̇ = u, with H the joint-space inertia
+  matrix, h the Coriolis and centrifugal terms, g the gravity torques and D = diag(d) the viscous
+  damping of the URDF's ``<dynamics damping>``;
+- the state x = (θ, θ̇) ∈ ℝ²ⁿ and the forward dynamics ẋ = f(x, u) of eq. (20), with Jacobians
+  A = ∂f/∂x and B = ∂f/∂u (eqs. 24-26);
+- along a path θ(s) with λ(s) = ds/dt (eq. 5), primes are s-derivatives, and eq. (10) gives
+  u(s) = λ²[Hθ'' + h(θ, θ')] + λ[λ'Hθ' + Dθ'] + g, or with b = λ² and a = ½ db/ds = λλ',
+  u = m·a + c·b + d·λ + g (the coefficient form a timing optimiser uses).
+
+This is the only module of nearopt that calls Pinocchio's dynamics. Pinocchio's ABA and RNEA know no
+joint damping, so Dθ̇ is added here, to the derivatives too.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+import pinocchio as pin
+
+from . import catalog
+from .errors import ConfigurationError, URDFError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["Robot", "JointLimits", "PathCoefficients"]
+
+_SUPPORTED_TYPES = ("revolute", "continuous", "prismatic", "fixed")
+_ONE_DOF_JOINTS = (
+    "JointModelRX",
+    "JointModelRY",
+    "JointModelRZ",
+    "JointModelRevoluteUnaligned",
+    "JointModelPX",
+    "JointModelPY",
+    "JointModelPZ",
+    "JointModelPrismaticUnaligned",
+)
+
+
+def _readonly(x: ArrayLike) -> NDArray[np.float64]:
+    a = np.array(x, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True)
+class JointLimits:
+    """Per-joint limits, read-only arrays of shape (n,).
+
+    Attributes
+    ----------
+    position_lower, position_upper
+        Joint position limits [rad or m]; ±inf where a joint has none (continuous joints).
+    velocity
+        Joint speed limits |θ̇_i| ≤ velocity_i [rad/s or m/s]; inf where none is declared.
+    effort_lower, effort_upper
+        Actuator limits u_min ≤ u ≤ u_max of eq. (2) [N·m or N].
+    """
+
+    position_lower: NDArray[np.float64]
+    position_upper: NDArray[np.float64]
+    velocity: NDArray[np.float64]
+    effort_lower: NDArray[np.float64]
+    effort_upper: NDArray[np.float64]
+
+
+class PathCoefficients(NamedTuple):
+    """Coefficients of eq. (10) along a sampled path, each of shape (N, n).
+
+    u = m·a + c·b + d·λ + g with b = λ², a = ½ db/ds, where m = Hθ', c = Hθ'' + h(θ, θ'),
+    d = Dθ', g = g(θ).
+    """
+
+    m: NDArray[np.float64]
+    c: NDArray[np.float64]
+    d: NDArray[np.float64]
+    g: NDArray[np.float64]
+
+
+def _parse_urdf(path: Path, locked: tuple[str, ...]) -> tuple[str, str, list[str], list[str]]:
+    """Read and check a URDF.
+
+    Returns the robot's name, the XML text for Pinocchio, the continuous joints and the joints that
+    declare no effort limit. Continuous joints become revolute joints without position limits, so
+    that θ is an angle in ℝ (Pinocchio would otherwise use (cos θ, sin θ), nq ≠ nv). A ``<limit>``
+    missing an attribute gets 0 (= undeclared) so that urdfdom accepts it and nearopt decides.
+    """
+    if not path.is_file():
+        raise URDFError(f"URDF file not found: {path}", path=str(path))
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise URDFError(f"malformed URDF {path}: {exc}", path=str(path)) from exc
+    except OSError as exc:
+        raise URDFError(f"cannot read URDF {path}: {exc}", path=str(path)) from exc
+    if root.tag != "robot":
+        raise URDFError(
+            f"{path} is not a URDF: its root element is <{root.tag}>, not <robot>", path=str(path)
+        )
+    joints = {j.get("name"): j for j in root.findall("joint")}
+    unknown = [name for name in locked if name not in joints]
+    if unknown:
+        raise URDFError(
+            f"cannot lock joint(s) {unknown}: {path} has no such joint", path=str(path)
+        )
+    continuous, no_effort = [], []
+    for name, joint in joints.items():
+        jtype = joint.get("type")
+        if jtype in ("floating", "planar"):
+            raise URDFError(
+                f"joint {name!r} of {path} is of type {jtype!r}: floating-base robots are not "
+                "supported, nearopt plans for fixed-base arms",
+                path=str(path),
+            )
+        if jtype not in _SUPPORTED_TYPES:
+            raise URDFError(
+                f"joint {name!r} of {path} has unsupported type {jtype!r} "
+                f"(supported: {', '.join(_SUPPORTED_TYPES)})",
+                path=str(path),
+            )
+        mimic = joint.find("mimic")
+        if mimic is not None and name not in locked:
+            raise URDFError(
+                f"joint {name!r} of {path} mimics joint {mimic.get('joint')!r}: mimic joints are "
+                "not supported; lock it (locked_joints=...) to plan for the rest of the arm",
+                path=str(path),
+            )
+        if jtype == "fixed":
+            continue
+        limit = joint.find("limit")
+        if limit is None:
+            limit = ET.SubElement(joint, "limit")
+        if jtype == "continuous":
+            joint.set("type", "revolute")
+            limit.set("lower", "0")
+            limit.set("upper", "0")
+            continuous.append(name)
+        if float(limit.get("effort", "0")) <= 0.0 and name not in locked:
+            no_effort.append(name)
+        for attr in ("effort", "velocity", "lower", "upper"):
+            limit.set(attr, limit.get(attr, "0"))
+    name = root.get("name", path.stem)
+    return name, ET.tostring(root, encoding="unicode"), continuous, no_effort
+
+
+class Robot:
+    """A fixed-base arm loaded from a URDF into Pinocchio.
+
+    Build one with :meth:`from_urdf` or :meth:`from_name`; it is immutable (use :meth:`with_limits`
+    for a copy with other limits). Methods take one configuration as an array of shape (n,).
+
+    Parameters
+    ----------
+    model
+        The Pinocchio model of the arm, every joint one-dimensional (nq = nv = n).
+    limits
+        The limits the planner enforces.
+    damping
+        Viscous damping d_i of each joint, D = diag(d) in eq. (1) [N·m·s/rad or N·s/m], shape (n,).
+    name
+        A name for messages and outputs.
+    tip
+        The frame traced as the end effector.
+    urdf_xml
+        The URDF text the model was built from (for visual geometry), if any.
+    urdf_path
+        The URDF file, if any (mesh URIs are resolved relative to it).
+    locked_joints
+        The joints of the URDF held fixed at their reference value.
+    """
+
+    def __init__(
+        self,
+        model: pin.Model,
+        *,
+        limits: JointLimits,
+        damping: ArrayLike,
+        name: str,
+        tip: str,
+        urdf_xml: str | None = None,
+        urdf_path: Path | None = None,
+        locked_joints: tuple[str, ...] = (),
+    ) -> None:
+        if model.nq != model.nv:
+            raise URDFError(f"robot {name!r}: nq = {model.nq} ≠ nv = {model.nv}")
+        self._model = model
+        self._data = model.createData()
+        self.name = name
+        self.tip = tip
+        self.limits = limits
+        self.damping = _readonly(damping)
+        self.urdf_xml = urdf_xml
+        self.urdf_path = urdf_path
+        self.locked_joints = tuple(locked_joints)
+        self._tip_id = _frame_id(model, tip, name)
+        self._has_damping = bool(np.any(self.damping != 0.0))
+
+    # ------------------------------------------------------------------ construction
+    @classmethod
+    def from_urdf(
+        cls,
+        path: str | Path,
+        *,
+        locked_joints: tuple[str, ...] | list[str] = (),
+        tip: str | None = None,
+        name: str | None = None,
+        effort_limit: ArrayLike | tuple[ArrayLike, ArrayLike] | None = None,
+        velocity_limit: ArrayLike | None = None,
+        position_limits: tuple[ArrayLike, ArrayLike] | None = None,
+        damping: ArrayLike | None = None,
+    ) -> Robot:
+        """Load an arm from a URDF file.
+
+        Parameters
+        ----------
+        path
+            The URDF file.
+        locked_joints
+            Joints to hold fixed at their reference value (0 clipped to their limits), e.g. the
+            fingers of a gripper.
+        tip
+            The end-effector frame; by default the last body frame on the last joint.
+        name
+            Name of the robot; by default the URDF's ``<robot name>``.
+        effort_limit, velocity_limit, position_limits, damping
+            Overrides of the URDF's values; see :meth:`with_limits`. ``damping`` [N·m·s/rad], (n,).
+
+        Raises
+        ------
+        URDFError
+            Missing or malformed file, floating base, mimic or unsupported joints, a moving joint
+            without inertia below it, or a joint without an effort limit and no override.
+        """
+        path = Path(path).expanduser().resolve()
+        locked = tuple(locked_joints)
+        robot_name, xml, continuous, no_effort = _parse_urdf(path, locked)
+        if no_effort and effort_limit is None:
+            raise URDFError(
+                f"joint {no_effort[0]!r} of {path} declares no effort limit (<limit effort>); "
+                "pass effort_limit=... to set the actuator limits",
+                path=str(path),
+            )
+        try:
+            full = pin.buildModelFromXML(xml)
+        except (RuntimeError, ValueError) as exc:
+            raise URDFError(f"Pinocchio cannot load {path}: {exc}", path=str(path)) from exc
+        for jid in range(1, full.njoints):
+            shortname = full.joints[jid].shortname()
+            if shortname not in _ONE_DOF_JOINTS:
+                raise URDFError(
+                    f"joint {full.names[jid]!r} of {path} is a {shortname}: only one-axis "
+                    "revolute and prismatic joints are supported",
+                    path=str(path),
+                )
+        if locked:
+            q_ref = np.clip(np.zeros(full.nq), full.lowerPositionLimit, full.upperPositionLimit)
+            model = pin.buildReducedModel(full, [full.getJointId(j) for j in locked], q_ref)
+        else:
+            model = full
+        names = list(model.names)[1:]
+        n = model.nv
+        if n == 0:
+            raise URDFError(f"{path} has no moving joint", path=str(path))
+
+        lower = np.array(model.lowerPositionLimit, dtype=float)
+        upper = np.array(model.upperPositionLimit, dtype=float)
+        for i, jn in enumerate(names):
+            if jn in continuous or lower[i] == upper[i]:
+                lower[i], upper[i] = -np.inf, np.inf
+        velocity = np.array(model.velocityLimit, dtype=float)
+        velocity[velocity <= 0.0] = np.inf
+        effort_lower = np.array(model.lowerEffortLimit, dtype=float)
+        effort_upper = np.array(model.upperEffortLimit, dtype=float)
+        robot = cls(
+            model,
+            limits=JointLimits(
+                _readonly(lower),
+                _readonly(upper),
+                _readonly(velocity),
+                _readonly(effort_lower),
+                _readonly(effort_upper),
+            ),
+            damping=np.array(model.damping, dtype=float),
+            name=name or robot_name,
+            tip=tip or _default_tip(model),
+            urdf_xml=xml,
+            urdf_path=path,
+            locked_joints=locked,
+        )
+        robot._check_inertia()
+        if any(x is not None for x in (effort_limit, velocity_limit, position_limits, damping)):
+            robot = robot.with_limits(
+                effort=effort_limit,
+                velocity=velocity_limit,
+                position=position_limits,
+                damping=damping,
+            )
+        return robot
+
+    @classmethod
+    def from_name(cls, name: str, **overrides: object) -> Robot:
+        """Load a known arm by name (see :func:`nearopt.available_robots`).
+
+        Parameters
+        ----------
+        name
+            ``two_link`` (the paper's arm, bundled) or an example-robot-data arm such as ``ur5``,
+            ``panda`` (fingers locked), ``xarm7``, ``z1`` (gripper locked), ``kinova``.
+        **overrides
+            Keyword arguments of :meth:`from_urdf` (limits, damping).
+
+        Raises
+        ------
+        RobotNotFoundError
+            For an unknown name; the message lists the known ones.
+        """
+        entry = catalog.robot_entry(name)
+        kwargs = {"tip": entry.tip, "locked_joints": entry.locked_joints, "name": entry.name}
+        kwargs.update(overrides)
+        return cls.from_urdf(entry.urdf, **kwargs)  # type: ignore[arg-type]
+
+    def with_limits(
+        self,
+        *,
+        effort: ArrayLike | tuple[ArrayLike, ArrayLike] | None = None,
+        velocity: ArrayLike | None = None,
+        position: tuple[ArrayLike, ArrayLike] | None = None,
+        damping: ArrayLike | None = None,
+    ) -> Robot:
+        """A copy of this robot with some limits (or the damping) replaced.
+
+        Parameters
+        ----------
+        effort
+            Symmetric limits |u_i| ≤ effort_i as a scalar or (n,) array, or a pair
+            (u_min, u_max) of (n,) arrays [N·m or N].
+        velocity
+            Speed limits [rad/s or m/s], scalar or (n,); ``np.inf`` removes them.
+        position
+            A pair (lower, upper) of (n,) arrays [rad or m]; ``±np.inf`` removes them.
+        damping
+            Viscous damping d_i [N·m·s/rad or N·s/m], scalar or (n,).
+
+        Raises
+        ------
+        ConfigurationError
+            Wrong shape, NaN, or a lower limit above an upper limit; the message names the joint.
+        """
+        lim = self.limits
+        e_lo, e_hi = lim.effort_lower, lim.effort_upper
+        if effort is not None:
+            if isinstance(effort, tuple):
+                e_lo = self._joint_array(effort[0], "lower effort limit")
+                e_hi = self._joint_array(effort[1], "upper effort limit")
+            else:
+                e_hi = self._joint_array(effort, "effort limit")
+                e_lo = -e_hi
+            self._check_order(e_lo, e_hi, "effort", strict=True)
+        vel = lim.velocity
+        if velocity is not None:
+            vel = self._joint_array(velocity, "velocity limit", allow_inf=True)
+            self._check_positive(vel, "velocity limit")
+        p_lo, p_hi = lim.position_lower, lim.position_upper
+        if position is not None:
+            p_lo = self._joint_array(position[0], "lower position limit", allow_inf=True)
+            p_hi = self._joint_array(position[1], "upper position limit", allow_inf=True)
+            self._check_order(p_lo, p_hi, "position", strict=False)
+        damp = self.damping
+        if damping is not None:
+            damp = self._joint_array(damping, "damping")
+            if np.any(damp < 0):
+                i = int(np.argmax(damp < 0))
+                raise ConfigurationError(
+                    f"damping of joint {self.joint_names[i]!r} is {damp[i]:g} < 0",
+                    joint=self.joint_names[i],
+                )
+        return Robot(
+            self._model,
+            limits=JointLimits(
+                _readonly(p_lo), _readonly(p_hi), _readonly(vel), _readonly(e_lo), _readonly(e_hi)
+            ),
+            damping=damp,
+            name=self.name,
+            tip=self.tip,
+            urdf_xml=self.urdf_xml,
+            urdf_path=self.urdf_path,
+            locked_joints=self.locked_joints,
+        )
+
+    # ------------------------------------------------------------------ description
+    @property
+    def n(self) -> int:
+        """Number of joints (degrees of freedom)."""
+        return self._model.nv
+
+    @property
+    def joint_names(self) -> list[str]:
+        """Names of the n joints, in the order of every joint vector."""
+        return list(self._model.names)[1:]
+
+    @property
+    def gravity(self) -> NDArray[np.float64]:
+        """Gravity acceleration vector of the world frame [m/s²], shape (3,)."""
+        return np.array(self._model.gravity.linear)
+
+    @property
+    def model(self) -> pin.Model:
+        """The Pinocchio model (read it; do not modify it)."""
+        return self._model
+
+    def __repr__(self) -> str:
+        return f"Robot({self.name!r}, n={self.n}, joints={self.joint_names})"
+
+    def summary(self) -> str:
+        """A table of the joints with their limits and damping, for people to read."""
+        lim = self.limits
+        rows = [
+            f"{self.name}: {self.n} joints, tip frame {self.tip!r}, "
+            f"gravity {np.round(self.gravity, 4).tolist()} m/s²",
+            f"{'joint':<28}{'position [lo, hi]':>24}{'|velocity|':>12}"
+            f"{'effort [lo, hi]':>22}{'damping':>10}",
+        ]
+        for i, jn in enumerate(self.joint_names):
+            rows.append(
+                f"{jn:<28}{f'[{lim.position_lower[i]:.4g}, {lim.position_upper[i]:.4g}]':>24}"
+                f"{lim.velocity[i]:>12.4g}"
+                f"{f'[{lim.effort_lower[i]:.4g}, {lim.effort_upper[i]:.4g}]':>22}"
+                f"{self.damping[i]:>10.4g}"
+            )
+        return "\n".join(rows)
+
+    # ------------------------------------------------------------------ dynamics (eq. 1)
+    def mass_matrix(self, q: ArrayLike) -> NDArray[np.float64]:
+        """H(θ), the joint-space inertia matrix of eq. (1), shape (n, n)."""
+        q = self.check_configuration(q)
+        return np.array(pin.crba(self._model, self._data, q))
+
+    def gravity_torque(self, q: ArrayLike) -> NDArray[np.float64]:
+        """g(θ), the gravity torques of eq. (1) [N·m or N], shape (n,)."""
+        q = self.check_configuration(q)
+        return np.array(pin.computeGeneralizedGravity(self._model, self._data, q))
+
+    def coriolis(self, q: ArrayLike, qd: ArrayLike) -> NDArray[np.float64]:
+        """h(θ, θ̇), the Coriolis and centrifugal torques of eq. (1), shape (n,)."""
+        q = self.check_configuration(q)
+        qd = self._joint_array(qd, "velocity")
+        return np.array(pin.nonLinearEffects(self._model, self._data, q, qd)) - np.array(
+            pin.computeGeneralizedGravity(self._model, self._data, q)
+        )
+
+    def inverse_dynamics(self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike) -> NDArray[np.float64]:
+        """u = H(θ)θ̈ + h(θ, θ̇) + g(θ) + Dθ̇ (eq. 1), shape (n,).
+
+        Parameters
+        ----------
+        q, qd, qdd
+            θ [rad], θ̇ [rad/s], θ̈ [rad/s²], each of shape (n,).
+        """
+        q = self.check_configuration(q)
+        qd = self._joint_array(qd, "velocity")
+        qdd = self._joint_array(qdd, "acceleration")
+        return np.array(pin.rnea(self._model, self._data, q, qd, qdd)) + self.damping * qd
+
+    def inverse_dynamics_batch(
+        self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike
+    ) -> NDArray[np.float64]:
+        """Eq. (1) at N samples: arrays of shape (N, n) in, torques of shape (N, n) out."""
+        q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
+        self._check_batch(q, qd, qdd)
+        rnea, model, data = pin.rnea, self._model, self._data
+        out = np.array([rnea(model, data, q[k], qd[k], qdd[k]) for k in range(q.shape[0])])
+        return out.reshape(q.shape) + self.damping * qd
+
+    def forward_dynamics(self, q: ArrayLike, qd: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
+        """θ̈ = H⁻¹(u − h − g − Dθ̇), the acceleration part of ẋ = f(x, u) (eq. 20), shape (n,)."""
+        q = self.check_configuration(q)
+        qd = self._joint_array(qd, "velocity")
+        u = self._joint_array(u, "torque")
+        return np.array(pin.aba(self._model, self._data, q, qd, u - self.damping * qd))
+
+    def state_derivative(self, x: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
+        """ẋ = f(x, u) of eq. (20) with x = (θ, θ̇), shape (2n,)."""
+        x = np.asarray(x, dtype=float)
+        n = self.n
+        if x.shape != (2 * n,):
+            raise ConfigurationError(f"state must have shape ({2 * n},), got {x.shape}")
+        return np.concatenate([x[n:], self.forward_dynamics(x[:n], x[n:], u)])
+
+    def dynamics_jacobians(
+        self, q: ArrayLike, qd: ArrayLike, u: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """A = ∂f/∂x (2n, 2n) and B = ∂f/∂u (2n, n) of ẋ = f(x, u) (eqs. 24-26).
+
+        From Pinocchio's analytic ABA derivatives, evaluated at the effective torque u − Dθ̇, with the
+        damping's −H⁻¹D added to ∂θ̈/∂θ̇.
+        """
+        q = self.check_configuration(q)
+        qd = self._joint_array(qd, "velocity")
+        u = self._joint_array(u, "torque")
+        n = self.n
+        ddq_dq, ddq_dv, minv = pin.computeABADerivatives(
+            self._model, self._data, q, qd, u - self.damping * qd
+        )
+        minv = np.array(minv)
+        a = np.zeros((2 * n, 2 * n))
+        a[:n, n:] = np.eye(n)
+        a[n:, :n] = ddq_dq
+        a[n:, n:] = np.array(ddq_dv) - minv * self.damping[None, :]
+        b = np.zeros((2 * n, n))
+        b[n:, :] = minv
+        return a, b
+
+    # ------------------------------------------------------------------ path form (eq. 10)
+    def path_coefficients(
+        self, theta: ArrayLike, dtheta: ArrayLike, ddtheta: ArrayLike
+    ) -> PathCoefficients:
+        """The coefficients m, c, d, g of eq. (10) at N path samples.
+
+        Parameters
+        ----------
+        theta, dtheta, ddtheta
+            θ(s_k), θ'(s_k), θ''(s_k) at N samples, each of shape (N, n) [rad, rad/unit s, …].
+
+        Returns
+        -------
+        PathCoefficients
+            m = Hθ', c = Hθ'' + h(θ, θ'), d = Dθ', g = g(θ), each (N, n), such that
+            u = m·a + c·b + d·λ + g with b = λ², a = λλ'.
+        """
+        theta, dtheta, ddtheta = (
+            np.atleast_2d(np.asarray(x, dtype=float)) for x in (theta, dtheta, ddtheta)
+        )
+        self._check_batch(theta, dtheta, ddtheta)
+        model, data = self._model, self._data
+        zero = np.zeros(self.n)
+        count = theta.shape[0]
+        g = np.empty((count, self.n))
+        c = np.empty((count, self.n))
+        m = np.empty((count, self.n))
+        for k in range(count):
+            g[k] = pin.computeGeneralizedGravity(model, data, theta[k])
+            c[k] = pin.rnea(model, data, theta[k], dtheta[k], ddtheta[k])
+            m[k] = pin.rnea(model, data, theta[k], zero, dtheta[k])
+        return PathCoefficients(m - g, c - g, self.damping * dtheta, g)
+
+    def path_torque(
+        self,
+        theta: ArrayLike,
+        dtheta: ArrayLike,
+        ddtheta: ArrayLike,
+        lam: ArrayLike,
+        dlam: ArrayLike,
+    ) -> NDArray[np.float64]:
+        """u(s) of eq. (10) at N path samples, shape (N, n).
+
+        Parameters
+        ----------
+        theta, dtheta, ddtheta
+            θ(s), θ'(s), θ''(s), each (N, n).
+        lam, dlam
+            λ(s) = ds/dt [unit s / s] and λ'(s) = dλ/ds [1/s], each (N,).
+        """
+        coef = self.path_coefficients(theta, dtheta, ddtheta)
+        lam = np.asarray(lam, dtype=float).reshape(-1, 1)
+        dlam = np.asarray(dlam, dtype=float).reshape(-1, 1)
+        return coef.m * (lam * dlam) + coef.c * lam**2 + coef.d * lam + coef.g
+
+    # ------------------------------------------------------------------ kinematics
+    def frame_position(self, q: ArrayLike, frame: str | None = None) -> NDArray[np.float64]:
+        """World position of a frame (default: the tip) [m]; q of shape (n,) or (N, n)."""
+        q = np.asarray(q, dtype=float)
+        fid = self._tip_id if frame is None else _frame_id(self._model, frame, self.name)
+        model, data = self._model, self._data
+        out = []
+        for qk in np.atleast_2d(q):
+            qk = self.check_configuration(qk)
+            pin.forwardKinematics(model, data, qk)
+            out.append(np.array(pin.updateFramePlacement(model, data, fid).translation))
+        return out[0] if q.ndim == 1 else np.array(out)
+
+    def link_placements(self, q: ArrayLike) -> dict[str, NDArray[np.float64]]:
+        """World placements of every link (body frame) as 4×4 homogeneous matrices."""
+        q = self.check_configuration(q)
+        pin.framesForwardKinematics(self._model, self._data, q)
+        return {
+            f.name: np.array(self._data.oMf[i].homogeneous)
+            for i, f in enumerate(self._model.frames)
+            if f.type == pin.FrameType.BODY
+        }
+
+    def visual_model(self) -> pin.GeometryModel:
+        """The URDF's visual geometry with ``package://`` mesh URIs resolved to files.
+
+        Raises
+        ------
+        URDFError
+            If the robot was not built from a URDF, or a mesh cannot be found.
+        """
+        if self.urdf_xml is None or self.urdf_path is None:
+            raise URDFError(f"robot {self.name!r} was not built from a URDF; it has no visuals")
+        dirs = [str(self.urdf_path.parent)]
+        try:
+            dirs += [str(d) for d in catalog.package_dirs()]
+        except URDFError:
+            pass
+        full = pin.buildModelFromXML(self.urdf_xml)
+        try:
+            geom = pin.buildGeomFromUrdfString(
+                full, self.urdf_xml, pin.GeometryType.VISUAL, package_dirs=dirs
+            )
+        except (RuntimeError, ValueError) as exc:
+            raise URDFError(f"cannot load the visuals of {self.urdf_path}: {exc}") from exc
+        if self.locked_joints:
+            q_ref = np.clip(np.zeros(full.nq), full.lowerPositionLimit, full.upperPositionLimit)
+            _, geom = pin.buildReducedModel(
+                full, geom, [full.getJointId(j) for j in self.locked_joints], q_ref
+            )
+        return geom
+
+    # ------------------------------------------------------------------ checks
+    def check_configuration(self, q: ArrayLike, what: str = "configuration") -> NDArray[np.float64]:
+        """Return q as a float array of shape (n,), or raise a :class:`ConfigurationError`."""
+        return self._joint_array(q, what)
+
+    def _joint_array(
+        self, x: ArrayLike, what: str, *, allow_inf: bool = False
+    ) -> NDArray[np.float64]:
+        try:
+            a = np.asarray(x, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ConfigurationError(f"{what} is not numeric: {x!r}") from exc
+        if a.ndim == 0:
+            a = np.full(self.n, float(a))
+        if a.shape != (self.n,):
+            raise ConfigurationError(
+                f"{what} must have {self.n} values (one per joint of {self.name}: "
+                f"{', '.join(self.joint_names)}), got shape {a.shape}"
+            )
+        bad = np.isnan(a) if allow_inf else ~np.isfinite(a)
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            raise ConfigurationError(
+                f"{what} of joint {self.joint_names[i]!r} is {a[i]}", joint=self.joint_names[i]
+            )
+        return a
+
+    def _check_batch(self, *arrays: NDArray[np.float64]) -> None:
+        shape = arrays[0].shape
+        for a in arrays:
+            if a.ndim != 2 or a.shape[1] != self.n or a.shape != shape:
+                raise ConfigurationError(
+                    f"expected arrays of shape (N, {self.n}) for {self.name}, got "
+                    f"{[x.shape for x in arrays]}"
+                )
+            if not np.all(np.isfinite(a)):
+                k, i = np.argwhere(~np.isfinite(a))[0]
+                raise ConfigurationError(
+                    f"sample {k} of joint {self.joint_names[i]!r} is {a[k, i]}",
+                    joint=self.joint_names[i],
+                )
+
+    def _check_order(
+        self, lo: NDArray[np.float64], hi: NDArray[np.float64], what: str, *, strict: bool
+    ) -> None:
+        bad = lo >= hi if strict else lo > hi
+        if np.any(bad):
+            i = int(np.argmax(bad))
+            raise ConfigurationError(
+                f"{what} limits of joint {self.joint_names[i]!r}: lower {lo[i]:g} is not below "
+                f"upper {hi[i]:g}",
+                joint=self.joint_names[i],
+            )
+
+    def _check_positive(self, x: NDArray[np.float64], what: str) -> None:
+        if np.any(x <= 0):
+            i = int(np.argmax(x <= 0))
+            raise ConfigurationError(
+                f"{what} of joint {self.joint_names[i]!r} is {x[i]:g}, must be > 0",
+                joint=self.joint_names[i],
+            )
+
+    def _check_inertia(self) -> None:
+        """Every joint must move some inertia, or H(θ) is singular and eq. (16) undefined."""
+        lim = self.limits
+        q = np.clip(np.zeros(self.n), lim.position_lower, lim.position_upper)
+        h = self.mass_matrix(q)
+        for i, jn in enumerate(self.joint_names):
+            if not h[i, i] > 1e-12:
+                raise URDFError(
+                    f"joint {jn!r} of {self.urdf_path} moves no inertia (H[{i},{i}] = "
+                    f"{h[i, i]:g}): the links below it declare no <inertial>",
+                    path=str(self.urdf_path),
+                )
+        if np.linalg.eigvalsh(h)[0] <= 0.0:
+            raise URDFError(f"the inertia matrix of {self.name} is not positive definite")
+
+
+def _frame_id(model: pin.Model, frame: str, robot: str) -> int:
+    """Id of a frame by name, the body frame where a joint frame bears the same name."""
+    for ftype in (pin.FrameType.BODY, pin.FrameType.OP_FRAME, pin.FrameType.FIXED_JOINT):
+        if model.existFrame(frame, ftype):
+            return model.getFrameId(frame, ftype)
+    if model.existFrame(frame):
+        return model.getFrameId(frame)
+    raise ConfigurationError(f"robot {robot!r} has no frame {frame!r}")
+
+
+def _default_tip(model: pin.Model) -> str:
+    last = model.njoints - 1
+    bodies = [f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == last]
+    return bodies[-1] if bodies else model.frames[-1].name
