@@ -1,0 +1,136 @@
+"""Spatial paths θ(s) (Section 3): a joint-space curve and its s-derivatives, without timing.
+
+A path is evaluated like TOPP-RA's: ``path(s, order)`` returns θ(s), θ'(s) or θ''(s) for an array of
+path parameters s ∈ [0, s_end]. The time needed to follow a path does not depend on how s is scaled
+(the paper uses the tip's arc length; nearopt's own paths use s ∈ [0, 1]).
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+
+import numpy as np
+from scipy.interpolate import CubicSpline
+
+from .errors import ConfigurationError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["Path", "StraightPath", "SplinePath"]
+
+Order = Literal[0, 1, 2]
+
+
+@runtime_checkable
+class Path(Protocol):
+    """A joint path θ(s), s ∈ [0, s_end]."""
+
+    @property
+    def s_end(self) -> float:
+        """Length s_e of the path parameter's range [unit of s]."""
+
+    @property
+    def dof(self) -> int:
+        """Number of joints n."""
+
+    def __call__(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
+        """θ(s) (order 0), θ'(s) (1) or θ''(s) (2) at the given s, shape (len(s), n)."""
+
+
+def _as_joint_vector(x: ArrayLike, what: str) -> NDArray[np.float64]:
+    a = np.asarray(x, dtype=float)
+    if a.ndim != 1 or a.size == 0:
+        raise ConfigurationError(f"{what} must be a 1-D joint vector, got shape {a.shape}")
+    if not np.all(np.isfinite(a)):
+        i = int(np.argmax(~np.isfinite(a)))
+        raise ConfigurationError(f"{what}[{i}] is {a[i]}")
+    return a
+
+
+class StraightPath:
+    """The straight joint-space line of eqs. (28)-(29): θ(s) = θ0 + (θe − θ0) s / s_e.
+
+    Parameters
+    ----------
+    theta0, thetae
+        Start and end configurations θ0, θe [rad or m], shape (n,).
+    s_end
+        Length of the parameter range s_e (default 1) [unit of s].
+    """
+
+    def __init__(self, theta0: ArrayLike, thetae: ArrayLike, s_end: float = 1.0) -> None:
+        self.theta0 = _as_joint_vector(theta0, "theta0")
+        self.thetae = _as_joint_vector(thetae, "thetae")
+        if self.theta0.shape != self.thetae.shape:
+            raise ConfigurationError(
+                f"theta0 has {self.theta0.size} joints but thetae has {self.thetae.size}"
+            )
+        if not (np.isfinite(s_end) and s_end > 0):
+            raise ConfigurationError(f"s_end must be a positive number, got {s_end}")
+        self._s_end = float(s_end)
+
+    @property
+    def s_end(self) -> float:
+        return self._s_end
+
+    @property
+    def dof(self) -> int:
+        return self.theta0.size
+
+    def __call__(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
+        s = np.atleast_1d(np.asarray(s, dtype=float))[:, None]
+        slope = (self.thetae - self.theta0) / self._s_end
+        if order == 0:
+            return self.theta0 + slope * s
+        if order == 1:
+            return np.repeat(slope[None], s.shape[0], axis=0)
+        if order == 2:
+            return np.zeros((s.shape[0], self.dof))
+        raise ValueError(f"order must be 0, 1 or 2, got {order}")
+
+
+class SplinePath:
+    """A C² cubic spline through joint samples, θ(s_k) = θ_k.
+
+    Parameters
+    ----------
+    s
+        Strictly increasing path parameters, starting at 0, shape (K,), K ≥ 2.
+    theta
+        Joint samples [rad or m], shape (K, n).
+    dtheta_ends
+        Optional (θ'(0), θ'(s_e)), each (n,), to clamp the end slopes; otherwise not-a-knot.
+    """
+
+    def __init__(
+        self,
+        s: ArrayLike,
+        theta: ArrayLike,
+        dtheta_ends: tuple[ArrayLike, ArrayLike] | None = None,
+    ) -> None:
+        s = np.asarray(s, dtype=float)
+        theta = np.asarray(theta, dtype=float)
+        if s.ndim != 1 or s.size < 2 or s[0] != 0.0 or np.any(np.diff(s) <= 0):
+            raise ConfigurationError("s must be strictly increasing from 0, with ≥ 2 samples")
+        if theta.ndim != 2 or theta.shape[0] != s.size or not np.all(np.isfinite(theta)):
+            raise ConfigurationError(
+                f"theta must be finite with shape ({s.size}, n), got {theta.shape}"
+            )
+        bc: object = "not-a-knot" if s.size > 3 else "natural"
+        if dtheta_ends is not None:
+            bc = ((1, np.asarray(dtheta_ends[0], float)), (1, np.asarray(dtheta_ends[1], float)))
+        self._spline = CubicSpline(s, theta, axis=0, bc_type=bc)
+        self._s_end = float(s[-1])
+
+    @property
+    def s_end(self) -> float:
+        return self._s_end
+
+    @property
+    def dof(self) -> int:
+        return int(self._spline.c.shape[-1])
+
+    def __call__(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        return np.asarray(self._spline(s, nu=order))

@@ -1,0 +1,591 @@
+"""Stage 1 (MCTP, Section 4): the optimal timing of a given path θ(s).
+
+For a path θ(s), find λ(s) = ds/dt ≥ 0 that minimises J = ∫ f0 dt = ∫ f0/λ ds (eq. 11) under the
+torque limits u_min ≤ u ≤ u_max (eq. 2) and, optionally, the joint speed limits |θ̇_i| ≤ v_i, at rest
+at both ends (λ(0) = λ(s_e) = 0, eq. 3).
+
+Representation. The paper writes λ(s) as a cubic B-spline with λ(0) = 0 (eqs. 12-15); then λ grows
+linearly in s at the ends and t = ∫ ds/λ diverges, so the "J" it reports depends on the quadrature.
+nearopt uses b = λ² instead, piecewise linear on a grid s_0 < … < s_N (constant path acceleration
+a = ½ db/ds on each segment; Verscheure et al., "Time-optimal path tracking for robots: a convex
+optimization approach", IEEE TAC 2009). Then λ ∝ √s at rest, segment times are exact,
+Δt_k = 2Δs_k / (λ_k + λ_{k+1}), and eq. (10) is linear in (a, b) but for the damping:
+
+    u = m(s)·a + c(s)·b + d(s)·λ + g(s),   m = Hθ', c = Hθ'' + h(θ, θ'), d = Dθ', g = g(θ).
+
+The discretised problem (variables b_1 … b_{N−1}; b_0 = b_N = 0):
+
+    minimise   Σ_k Δt_k · ½ [f0(sample k⁺) + f0(sample (k+1)⁻)]
+    subject to u_min ≤ u ≤ u_max at both ends of every segment (k⁺ and (k+1)⁻, with that
+               segment's a), and b_k θ'_i(s_k)² ≤ v_i² (joint speed limits).
+
+For f0 = 1 + Σ w_i u_i² (time, the paper's eq. 32, per-joint weights) and D = 0 this is convex:
+u is affine in b and u²/(√b_k + √b_{k+1}) is convex, so its global optimum is found:
+
+1. Feasibility is decided exactly: some timing exists iff gravity alone is within the limits at
+   every knot (b → 0 gives u → g); otherwise :class:`InfeasiblePathError` says where.
+2. HiGHS (``scipy.optimize.linprog``) maximises Σ b_k: the greatest feasible speed profile, which is
+   the time-optimal timing when the feasible set is a lattice (as for the pairwise constraints here).
+   For f0 = 1 a second LP checks the KKT conditions at that profile (a certificate of optimality);
+3. otherwise SciPy's ``trust-constr`` interior-point method solves the NLP from there, with the
+   exact gradient and the (tridiagonal) Hessian from differences of that gradient.
+
+Damping makes u depend on λ = √b. It is handled, not dropped: the LPs linearise √b at the previous
+profile until a fixed point (where the linearisation is exact), and ``trust-constr`` takes the
+torque limits as nonlinear constraints. The problem is then not convex in general (local optimum).
+The answer is finally scaled into the limits (b → αb, α ≤ 1) if the solver's tolerance left any
+torque sample outside them.
+"""
+
+from __future__ import annotations
+
+import time
+import warnings
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.optimize import Bounds, LinearConstraint, NonlinearConstraint, linprog, minimize
+
+from .cost import Cost, TimeCost, TorqueCost
+from .errors import ConfigurationError, InfeasiblePathError, SolverError
+from .robot import PathCoefficients
+from .trajectory import Trajectory
+
+if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
+    from .path import Path
+    from .robot import Robot
+
+__all__ = [
+    "TimingProblem",
+    "TimingSolution",
+    "TimingResult",
+    "build_timing_problem",
+    "solve_timing",
+    "optimal_timing",
+]
+
+
+@dataclass(frozen=True)
+class TimingProblem:
+    """Stage 1 on a grid, as arrays (no robot model needed: the kernel's input).
+
+    Attributes
+    ----------
+    s
+        Knots of the normalised path parameter σ = s / s_e, 0 = σ_0 < … < σ_N = 1, shape (N+1,).
+        The kernel works in σ so that b = (dσ/dt)² is of the order of 1/t_e² whatever the unit
+        of s; J does not depend on that choice.
+    theta, dtheta
+        θ(σ_k) [rad] and dθ/dσ [rad] at the knots, shape (N+1, n).
+    coef
+        m, c, d, g of eq. (10) with respect to σ at the knots, each (N+1, n).
+    u_lower, u_upper
+        Actuator limits of eq. (2) [N·m], shape (n,).
+    b_upper
+        Upper bound on b = (dσ/dt)² at each knot from the joint speed limits (inf if none), (N+1,).
+    joint_names
+        Names of the n joints, for messages.
+    """
+
+    s: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    dtheta: NDArray[np.float64]
+    coef: PathCoefficients
+    u_lower: NDArray[np.float64]
+    u_upper: NDArray[np.float64]
+    b_upper: NDArray[np.float64]
+    joint_names: tuple[str, ...]
+
+    @property
+    def segments(self) -> int:
+        """N, the number of grid segments."""
+        return self.s.size - 1
+
+    @property
+    def dof(self) -> int:
+        """n, the number of joints."""
+        return self.theta.shape[1]
+
+
+@dataclass(frozen=True)
+class TimingSolution:
+    """The kernel's answer: b = λ² at the knots and how it was found.
+
+    Attributes
+    ----------
+    b
+        λ² at the knots, shape (N+1,), b_0 = b_N = 0.
+    objective
+        The discretised cost at b.
+    status
+        ``"optimal"`` (KKT conditions met to tolerance) or ``"iteration_limit"``.
+    solver
+        The method that produced b (``"highs-lp"`` or ``"trust-constr"``).
+    iterations
+        Iterations of that method.
+    message
+        The solver's own words.
+    """
+
+    b: NDArray[np.float64]
+    objective: float
+    status: str
+    solver: str
+    iterations: int
+    message: str
+
+
+@dataclass(frozen=True)
+class TimingResult:
+    """The optimal timing of a path: a trajectory and its cost.
+
+    Attributes
+    ----------
+    trajectory
+        θ(t), θ̇(t), θ̈(t), u(t) for t ∈ [0, duration].
+    J
+        ∫ f0 dt of the returned motion [s·(unit of f0)], by Gauss-Legendre quadrature per segment.
+    duration
+        t_e [s].
+    objective
+        The discretised cost the solver minimised (differs from J by the discretisation, O(Δs²)).
+    status, solver, iterations, message
+        As in :class:`TimingSolution`.
+    wall_time
+        Time spent [s], building the problem included.
+    """
+
+    trajectory: Trajectory
+    J: float
+    duration: float
+    objective: float
+    status: str
+    solver: str
+    iterations: int
+    message: str
+    wall_time: float
+
+
+# ----------------------------------------------------------------------------- building
+def build_timing_problem(
+    robot: Robot,
+    path: Path,
+    *,
+    grid: int = 200,
+    velocity_limits: bool = True,
+) -> TimingProblem:
+    """Sample a path on a uniform grid and collect what stage 1 needs.
+
+    Parameters
+    ----------
+    robot
+        The arm (its limits are the ones enforced).
+    path
+        θ(s), s ∈ [0, s_e], with ``path.dof == robot.n``.
+    grid
+        N, the number of segments (≥ 2).
+    velocity_limits
+        Enforce the robot's joint speed limits |θ̇_i| ≤ v_i.
+    """
+    if not isinstance(grid, int | np.integer) or grid < 2:
+        raise ConfigurationError(f"grid must be an integer ≥ 2, got {grid!r}")
+    if path.dof != robot.n:
+        raise ConfigurationError(f"the path has {path.dof} joints, {robot.name} has {robot.n}")
+    sigma = np.linspace(0.0, 1.0, grid + 1)
+    s = sigma * path.s_end
+    theta = path(s, 0)
+    dtheta = path(s, 1) * path.s_end  # d/dσ = s_e d/ds
+    ddtheta = path(s, 2) * path.s_end**2
+    coef = robot.path_coefficients(theta, dtheta, ddtheta)
+    b_upper = np.full(s.size, np.inf)
+    if velocity_limits:
+        v = robot.limits.velocity
+        with np.errstate(divide="ignore"):
+            b_upper = np.min(np.where(dtheta != 0, v**2 / dtheta**2, np.inf), axis=1)
+    return TimingProblem(
+        s=sigma,
+        theta=theta,
+        dtheta=dtheta,
+        coef=coef,
+        u_lower=np.array(robot.limits.effort_lower),
+        u_upper=np.array(robot.limits.effort_upper),
+        b_upper=b_upper,
+        joint_names=tuple(robot.joint_names),
+    )
+
+
+# ----------------------------------------------------------------------------- the kernel
+class _Discretisation:
+    """Torque samples and the cost as functions of the free variables z = b_1 … b_{N−1}."""
+
+    def __init__(self, problem: TimingProblem) -> None:
+        p = problem
+        big_n, n = p.segments, p.dof
+        ds = np.diff(p.s)
+        # sample r: node[r], segment seg[r]; r < N: start of segment r, r ≥ N: end of segment r − N
+        self.node = np.concatenate([np.arange(big_n), np.arange(1, big_n + 1)])
+        self.seg = np.concatenate([np.arange(big_n), np.arange(big_n)])
+        self.ds = ds
+        self.problem = p
+        rows = np.arange(2 * big_n)
+        blocks = []
+        for i in range(n):
+            m, c = p.coef.m[self.node, i], p.coef.c[self.node, i]
+            slope = m / (2.0 * ds[self.seg])
+            blocks.append(
+                sp.coo_matrix(
+                    (
+                        np.concatenate([-slope, slope, c]),
+                        (np.tile(rows, 3), np.concatenate([self.seg, self.seg + 1, self.node])),
+                    ),
+                    shape=(2 * big_n, big_n + 1),
+                )
+            )
+        # rows joint-major (i·2N + r); columns: the free knots 1 … N−1
+        self.k_full = sp.vstack(blocks).tocsr()
+        self.k = self.k_full[:, 1:-1].tocsc()
+        self.u0 = p.coef.g[self.node].T.ravel()
+        self.damp = p.coef.d[self.node].T.ravel()
+        self.has_damping = bool(np.any(self.damp != 0.0))
+        self.lower = np.repeat(p.u_lower, 2 * big_n)
+        self.upper = np.repeat(p.u_upper, 2 * big_n)
+
+    def b(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        return np.concatenate([[0.0], z, [0.0]])
+
+    def torque(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """All torque samples, joint-major, shape (n·2N,)."""
+        u = self.k @ z + self.u0
+        if self.has_damping:
+            u += self.damp * np.tile(np.sqrt(self.b(z))[self.node], self.problem.dof)
+        return u
+
+    def torque_jacobian(self, z: NDArray[np.float64]) -> sp.csc_matrix:
+        if not self.has_damping:
+            return self.k
+        return (self.k + sp.diags(self.damp) @ self._sqrt_b_jacobian(z)).tocsc()
+
+    def _sqrt_b_jacobian(self, z: NDArray[np.float64]) -> sp.csr_matrix:
+        """∂√b(node[r]) / ∂z for every sample row (tiled over joints)."""
+        big_n = self.problem.segments
+        col = self.node - 1
+        free = (col >= 0) & (col < big_n - 1)
+        vals = np.zeros(self.node.size)
+        vals[free] = 0.5 / np.sqrt(z[col[free]])
+        j = sp.coo_matrix(
+            (vals[free], (np.arange(self.node.size)[free], col[free])),
+            shape=(self.node.size, big_n - 1),
+        )
+        return sp.vstack([j] * self.problem.dof).tocsr()
+
+    def segment_times(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        lam = np.sqrt(self.b(z))
+        return 2.0 * self.ds / (lam[:-1] + lam[1:])
+
+    def objective(self, z: NDArray[np.float64], cost: Cost) -> tuple[float, NDArray[np.float64]]:
+        """The discretised J and its gradient with respect to z."""
+        p = self.problem
+        n, big_n = p.dof, p.segments
+        b = self.b(z)
+        lam = np.sqrt(b)
+        dt = 2.0 * self.ds / (lam[:-1] + lam[1:])
+        u = self.torque(z).reshape(n, 2 * big_n).T
+        q = p.theta[self.node]
+        qd = p.dtheta[self.node] * lam[self.node, None]
+        f = cost(q, qd, u)
+        _, df_dqd, df_du = cost.gradients(q, qd, u)
+        fbar = 0.5 * (f[:big_n] + f[big_n:])
+        value = float(np.sum(dt * fbar))
+        # ∂/∂b of every knot (b_0 and b_N are dropped at the end)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            inv2lam = np.where(lam > 0, 0.5 / lam, 0.0)
+        ddt = -dt / (lam[:-1] + lam[1:])  # ∂Δt_k/∂λ, the same for both ends
+        grad = np.zeros(b.size)
+        np.add.at(grad, np.arange(big_n), ddt * inv2lam[:-1] * fbar)
+        np.add.at(grad, np.arange(1, big_n + 1), ddt * inv2lam[1:] * fbar)
+        weight = 0.5 * dt[self.seg]  # each sample's share of its segment's time
+        du = weight[:, None] * df_du  # ∂J/∂u at every sample, (2N, n)
+        grad += np.asarray(self.k_full.T @ du.T.ravel()).ravel()
+        # through λ = √b of the sample's knot: θ̇ = λθ' and the damping torque dλ
+        node_term = weight * np.sum(df_dqd * p.dtheta[self.node], axis=1) + np.sum(
+            du * p.coef.d[self.node], axis=1
+        )
+        np.add.at(grad, self.node, node_term * inv2lam[self.node])
+        return value, grad[1:-1]
+
+
+def _tridiagonal_hessian(
+    grad: callable, x: NDArray[np.float64], g0: NDArray[np.float64]
+) -> sp.csr_matrix:
+    """Hessian of a chain-structured function from three forward differences of its gradient."""
+    p = x.size
+    h = 1e-7 * np.maximum(np.abs(x), 1e-3)
+    rows, cols, vals = [], [], []
+    idx = np.arange(p)
+    for colour in range(3):
+        e = np.where(idx % 3 == colour, h, 0.0)
+        dg = grad(x + e) - g0
+        j = idx + ((colour - idx + 1) % 3) - 1  # the column of this colour next to row i
+        ok = (j >= 0) & (j < p)
+        rows.append(idx[ok])
+        cols.append(j[ok])
+        vals.append(dg[ok] / h[j[ok]])
+    hess = sp.coo_matrix(
+        (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, p)
+    ).tocsr()
+    return 0.5 * (hess + hess.T)
+
+
+def _check_gravity(problem: TimingProblem) -> None:
+    """Raise InfeasiblePathError where gravity alone leaves the torque limits (b → 0 ⇒ u → g)."""
+    g = problem.coef.g
+    margin = 1e-9 * (problem.u_upper - problem.u_lower)
+    over = g - (problem.u_upper - margin)
+    under = (problem.u_lower + margin) - g
+    excess = np.maximum(over, under)
+    if np.any(excess > 0):
+        k, i = np.unravel_index(np.argmax(excess), excess.shape)
+        side = "upper" if over[k, i] >= under[k, i] else "lower"
+        limit = problem.u_upper[i] if side == "upper" else problem.u_lower[i]
+        bad = np.flatnonzero(np.any(excess > 0, axis=1))
+        raise InfeasiblePathError(
+            f"no timing of this path respects the torque limits: gravity alone needs "
+            f"u = {g[k, i]:.6g} at joint {problem.joint_names[i]!r}, beyond its {side} limit "
+            f"{limit:.6g} by {excess[k, i]:.6g}, at s/s_e = {problem.s[k]:.6g} "
+            f"(θ = {np.round(problem.theta[k], 6).tolist()}); the path is infeasible for "
+            f"s/s_e ∈ [{problem.s[bad[0]]:.6g}, {problem.s[bad[-1]]:.6g}]",
+            joint=problem.joint_names[i],
+            s=float(problem.s[k]),
+            excess=float(excess[k, i]),
+        )
+
+
+def _lp(
+    disc: _Discretisation, c: NDArray[np.float64], z_lin: NDArray[np.float64] | None = None
+) -> tuple[NDArray[np.float64], float]:
+    """minimise c·z over the torque polytope with HiGHS.
+
+    The damping torque d·√b is linearised at ``z_lin`` (tangent, exact at z_lin), or left out
+    when ``z_lin`` is None (to find a first profile to linearise at).
+    """
+    k, u0 = disc.k, disc.u0
+    if disc.has_damping and z_lin is not None:
+        jac = disc.torque_jacobian(z_lin)
+        u0 = disc.torque(z_lin) - jac @ z_lin
+        k = jac
+    ub = disc.problem.b_upper[1:-1]
+    res = linprog(
+        c,
+        A_ub=sp.vstack([k, -k]).tocsr(),
+        b_ub=np.concatenate([disc.upper - u0, u0 - disc.lower]),
+        bounds=np.column_stack([np.zeros(ub.size), np.where(np.isfinite(ub), ub, np.nan)]),
+        method="highs",
+    )
+    if res.status != 0:
+        raise SolverError(f"HiGHS failed on the stage-1 LP: {res.message}", status=res.status)
+    return np.maximum(res.x, 0.0), float(res.fun)
+
+
+def _greatest_profile(disc: _Discretisation) -> tuple[NDArray[np.float64], int]:
+    """The greatest feasible b (maximise Σ b), damping linearised to a fixed point."""
+    weights = -np.ones(disc.problem.segments - 1)
+    z, _ = _lp(disc, weights)
+    rounds = 1
+    if disc.has_damping:
+        for rounds in range(2, 52):
+            z_new, _ = _lp(disc, weights, np.maximum(z, 1e-12 * max(z.max(), 1e-12)))
+            change = np.max(np.abs(z_new - z)) / max(z_new.max(), 1e-300)
+            z = z_new
+            if change < 1e-10:
+                break
+    return z, rounds
+
+
+def _into_limits(disc: _Discretisation, z: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Scale b by the largest α ≤ 1 that puts every torque sample within the limits.
+
+    Without damping u(αb) = g + α(u(b) − g), a convex combination of two feasible torques, so the
+    scaled profile is feasible; with damping the same α is found by bisection.
+    """
+
+    def violation(zz: NDArray[np.float64]) -> float:
+        u = disc.torque(zz)
+        return float(max(np.max(u - disc.upper), np.max(disc.lower - u)))
+
+    z = np.minimum(z, disc.problem.b_upper[1:-1])
+    if violation(z) <= 0.0:
+        return z
+    lo, hi = 0.0, 1.0
+    for _ in range(60):
+        mid = 0.5 * (lo + hi)
+        if violation(mid * z) <= 0.0:
+            lo = mid
+        else:
+            hi = mid
+    return lo * z
+
+
+def solve_timing(
+    problem: TimingProblem,
+    cost: Cost,
+    *,
+    tolerance: float = 1e-9,
+    max_iterations: int = 1000,
+) -> TimingSolution:
+    """Solve stage 1 on a grid (the kernel: arrays in, b out).
+
+    Parameters
+    ----------
+    problem
+        The sampled path, its coefficients and the limits (see :func:`build_timing_problem`).
+    cost
+        The running cost f0.
+    tolerance
+        Optimality tolerance of the NLP (gradient, step and barrier tolerances).
+    max_iterations
+        Iteration limit of the NLP.
+
+    Raises
+    ------
+    InfeasiblePathError
+        If gravity alone exceeds a torque limit somewhere on the path.
+    SolverError
+        If HiGHS fails (it should not on a feasible problem).
+    """
+    _check_gravity(problem)
+    disc = _Discretisation(problem)
+    z_max, rounds = _greatest_profile(disc)
+    z_max = _into_limits(disc, z_max)
+    if np.any(z_max <= 0):
+        raise SolverError("stage 1 found no positive speed profile although gravity is feasible")
+
+    weights = cost.torque_weights(problem.dof) if isinstance(cost, TorqueCost) else None
+    if weights is not None and not np.any(weights):
+        # f0 = 1: certify the greatest profile by the KKT conditions of min Σ Δt (an LP in the
+        # descent direction: no feasible z decreases the linearised time).
+        _, grad = disc.objective(z_max, TimeCost())
+        z_best, best = _lp(disc, grad, z_max)
+        here = float(grad @ z_max)
+        if here - best <= 1e-9 * abs(here):
+            return TimingSolution(
+                b=disc.b(z_max),
+                objective=float(np.sum(disc.segment_times(z_max))),
+                status="optimal",
+                solver="highs-lp",
+                iterations=rounds + 1,
+                message="greatest feasible speed profile; KKT conditions certified by an LP",
+            )
+
+    ub = disc.problem.b_upper[1:-1]
+    lb = np.full(ub.size, 1e-10)
+
+    def fun(x: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
+        return disc.objective(x, cost)
+
+    def hess(x: NDArray[np.float64]) -> sp.csr_matrix:
+        return _tridiagonal_hessian(lambda y: fun(y)[1], x, fun(x)[1])
+
+    if disc.has_damping:
+
+        def c_hess(x: NDArray[np.float64], v: NDArray[np.float64]) -> sp.csr_matrix:
+            # ∂²(d·√b)/∂b² = −d / (4 b^{3/2}) on the sample's own knot
+            b = disc.b(x)
+            col = np.tile(disc.node, problem.dof)
+            w = v * disc.damp * -0.25 * np.where(b[col] > 0, b[col], np.inf) ** -1.5
+            return sp.diags(np.bincount(col, weights=w, minlength=b.size)[1:-1])
+
+        constraint = NonlinearConstraint(
+            disc.torque, disc.lower, disc.upper, jac=disc.torque_jacobian, hess=c_hess
+        )
+    else:
+        constraint = LinearConstraint(disc.k, disc.lower - disc.u0, disc.upper - disc.u0)
+    x0 = 0.7 * z_max  # strictly inside: u(0.7 b) = g + 0.7 (u(b) − g)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")  # trust-constr warns about its own heuristics
+        res = minimize(
+            fun,
+            x0,
+            jac=True,
+            hess=hess,
+            method="trust-constr",
+            bounds=Bounds(lb, ub),
+            constraints=[constraint],
+            options={
+                "gtol": tolerance,
+                "xtol": tolerance,
+                "barrier_tol": tolerance,
+                "maxiter": max_iterations,
+            },
+        )
+    if not np.all(np.isfinite(res.x)):
+        raise SolverError(f"trust-constr returned a non-finite timing: {res.message}")
+    z = _into_limits(disc, np.maximum(res.x, lb))
+    return TimingSolution(
+        b=disc.b(z),
+        objective=disc.objective(z, cost)[0],
+        status="optimal" if res.status in (1, 2) else "iteration_limit",
+        solver="trust-constr",
+        iterations=int(res.nit),
+        message=str(res.message),
+    )
+
+
+def optimal_timing(
+    robot: Robot,
+    path: Path,
+    cost: Cost | None = None,
+    *,
+    grid: int = 200,
+    velocity_limits: bool = True,
+    tolerance: float = 1e-9,
+) -> TimingResult:
+    """Stage 1: the timing λ(s) of a path that minimises J = ∫ f0 dt under the robot's limits.
+
+    Parameters
+    ----------
+    robot
+        The arm; its effort limits (and, if ``velocity_limits``, speed limits) are enforced.
+    path
+        The spatial path θ(s).
+    cost
+        The running cost f0; default :class:`~nearopt.TimeCost` (time-optimal).
+    grid
+        N, the number of grid segments.
+    velocity_limits
+        Enforce |θ̇_i| ≤ v_i (the URDF's velocity limits unless overridden).
+    tolerance
+        Optimality tolerance of the NLP.
+
+    Returns
+    -------
+    TimingResult
+        The trajectory, J (integrated over the returned motion) and the solver's report.
+
+    Raises
+    ------
+    InfeasiblePathError
+        If gravity alone exceeds a torque limit somewhere on the path (names joint, s, θ, excess).
+    """
+    t0 = time.perf_counter()
+    cost = TimeCost() if cost is None else cost
+    problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
+    sol = solve_timing(problem, cost, tolerance=tolerance)
+    # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
+    traj = Trajectory(
+        path, problem.s * path.s_end, sol.b * path.s_end**2, robot.inverse_dynamics_batch
+    )
+    return TimingResult(
+        trajectory=traj,
+        J=traj.integrate(cost),
+        duration=traj.duration,
+        objective=sol.objective,
+        status=sol.status,
+        solver=sol.solver,
+        iterations=sol.iterations,
+        message=sol.message,
+        wall_time=time.perf_counter() - t0,
+    )

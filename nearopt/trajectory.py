@@ -1,0 +1,142 @@
+"""Time trajectories θ(t) of a path timed by stage 1, evaluated like a path.
+
+A timing is the squared path speed b(s) = λ(s)² at knots s_0 = 0 < … < s_N = s_e, linear in s
+between knots, i.e. a constant path acceleration s̈ = a_k = (b_{k+1} − b_k) / (2Δs_k) on each
+segment (Verscheure et al., 2009). In time this is exact and closed-form: on segment k, with
+τ = t − t_k,
+
+    s(τ) = s_k + λ_k τ + ½ a_k τ²,  ṡ(τ) = λ_k + a_k τ,  s̈ = a_k,  Δt_k = 2Δs_k / (λ_k + λ_{k+1}),
+
+so the duration is finite even at rest (λ ∝ √s near s = 0), unlike a λ(s) that starts at 0 linearly.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import TYPE_CHECKING, Literal
+
+import numpy as np
+
+from .errors import ConfigurationError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, NDArray
+
+    from .path import Path
+
+__all__ = ["Trajectory"]
+
+InverseDynamics = Callable[["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"],
+                           "NDArray[np.float64]"]
+
+
+class Trajectory:
+    """A path θ(s) followed with the speed profile b(s) = λ(s)², as a function of time.
+
+    Parameters
+    ----------
+    path
+        The spatial path θ(s).
+    s
+        Knots s_0 = 0 < … < s_N = s_e [unit of s], shape (N+1,).
+    b
+        λ² at the knots [(unit of s / s)²], ≥ 0, shape (N+1,); b > 0 at interior knots.
+    inverse_dynamics
+        u(θ, θ̇, θ̈) for arrays of shape (M, n) (e.g. ``Robot.inverse_dynamics_batch``).
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        s: ArrayLike,
+        b: ArrayLike,
+        inverse_dynamics: InverseDynamics,
+    ) -> None:
+        s = np.asarray(s, dtype=float)
+        b = np.asarray(b, dtype=float)
+        if s.ndim != 1 or s.shape != b.shape or s.size < 2 or np.any(np.diff(s) <= 0):
+            raise ConfigurationError("knots s must increase strictly and match b in shape")
+        if np.any(b < 0) or not np.all(np.isfinite(b)) or np.any(b[1:-1] <= 0):
+            raise ConfigurationError("b must be finite, ≥ 0, and > 0 at interior knots")
+        self.path = path
+        self.s = s
+        self.b = b
+        self.lam = np.sqrt(b)
+        self.a = np.diff(b) / (2.0 * np.diff(s))
+        self.t = np.concatenate([[0.0], np.cumsum(2.0 * np.diff(s) / (self.lam[:-1] + self.lam[1:]))])
+        self._inverse_dynamics = inverse_dynamics
+        for arr in (self.s, self.b, self.lam, self.a, self.t):
+            arr.setflags(write=False)
+
+    @property
+    def duration(self) -> float:
+        """t_e, the time the motion takes [s]."""
+        return float(self.t[-1])
+
+    @property
+    def dof(self) -> int:
+        """Number of joints n."""
+        return self.path.dof
+
+    def path_parameter(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """s(t), ṡ(t) = λ, s̈(t) at the given times (clipped to [0, t_e]), each of shape (M,)."""
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, self.s.size - 2)
+        tau = t - self.t[k]
+        acc = self.a[k]
+        s = np.minimum(self.s[k] + self.lam[k] * tau + 0.5 * acc * tau**2, self.s[-1])
+        sd = np.maximum(self.lam[k] + acc * tau, 0.0)
+        return s, sd, acc
+
+    def __call__(self, t: ArrayLike, order: Literal[0, 1, 2] = 0) -> NDArray[np.float64]:
+        """θ(t) (order 0), θ̇(t) (1) or θ̈(t) (2), shape (M, n); at a knot, the segment after it."""
+        s, sd, sdd = self.path_parameter(t)
+        if order == 0:
+            return self.path(s, 0)
+        d1 = self.path(s, 1)
+        if order == 1:
+            return d1 * sd[:, None]
+        if order == 2:
+            return self.path(s, 2) * (sd**2)[:, None] + d1 * sdd[:, None]
+        raise ValueError(f"order must be 0, 1 or 2, got {order}")
+
+    def torque(self, t: ArrayLike) -> NDArray[np.float64]:
+        """u(t) by inverse dynamics (eq. 1) [N·m or N], shape (M, n)."""
+        return self._inverse_dynamics(self(t, 0), self(t, 1), self(t, 2))
+
+    def sample(self, rate: float) -> dict[str, NDArray[np.float64]]:
+        """Samples at ``rate`` [Hz] from 0 to t_e inclusive: t, q, qd, qdd, tau.
+
+        Raises
+        ------
+        ConfigurationError
+            If the rate is not a positive number.
+        """
+        if not (np.isfinite(rate) and rate > 0):
+            raise ConfigurationError(f"the sampling rate must be > 0 Hz, got {rate}")
+        count = int(np.floor(self.duration * rate + 1e-9)) + 1
+        t = np.arange(count) / rate
+        if t[-1] < self.duration:
+            t = np.append(t, self.duration)
+        q, qd, qdd = self(t, 0), self(t, 1), self(t, 2)
+        return {"t": t, "q": q, "qd": qd, "qdd": qdd, "tau": self._inverse_dynamics(q, qd, qdd)}
+
+    def integrate(
+        self, f0: Callable[..., NDArray[np.float64]], points: int = 6
+    ) -> float:
+        """∫ f0(θ, θ̇, u) dt over the motion, by Gauss-Legendre quadrature on each segment.
+
+        Parameters
+        ----------
+        f0
+            A cost: called with θ, θ̇, u of shape (M, n), returns shape (M,).
+        points
+            Quadrature points per segment (exact for polynomials of degree 2·points − 1 in τ).
+        """
+        x, w = np.polynomial.legendre.leggauss(points)
+        dt = np.diff(self.t)
+        t = (self.t[:-1, None] + 0.5 * dt[:, None] * (x[None, :] + 1.0)).ravel()
+        # the right-continuous evaluation picks the segment each node lies in (nodes are interior)
+        q, qd, qdd = self(t, 0), self(t, 1), self(t, 2)
+        values = np.asarray(f0(q, qd, self._inverse_dynamics(q, qd, qdd))).reshape(dt.size, points)
+        return float(np.sum(0.5 * dt * (values @ w)))
