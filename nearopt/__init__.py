@@ -6,6 +6,7 @@ The package follows the paper "Near-Optimum Trajectory Planning for Robot Manipu
 """
 
 from .catalog import available_robots
+from .cost import CallableCost, Cost, TimeCost, TorqueCost
 from .errors import (
     ConfigurationError,
     InfeasiblePathError,
@@ -14,10 +15,23 @@ from .errors import (
     SolverError,
     URDFError,
 )
+from .path import Path, SplinePath, StraightPath
 from .robot import JointLimits, PathCoefficients, Robot
+from .timing import TimingResult, optimal_timing
+from .trajectory import Trajectory
 
 __all__ = [
     "Robot",
+    "Path",
+    "StraightPath",
+    "SplinePath",
+    "Cost",
+    "TimeCost",
+    "TorqueCost",
+    "CallableCost",
+    "optimal_timing",
+    "TimingResult",
+    "Trajectory",
     "JointLimits",
     "PathCoefficients",
     "available_robots",

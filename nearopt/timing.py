@@ -429,6 +429,128 @@ def _into_limits(disc: _Discretisation, z: NDArray[np.float64]) -> NDArray[np.fl
     return lo * z
 
 
+def _socp(
+    disc: _Discretisation,
+    weights: NDArray[np.float64],
+    z_lin: NDArray[np.float64] | None,
+    tolerance: float,
+) -> tuple[NDArray[np.float64], object]:
+    """The convex problem for f0 = 1 + Σ w_i u_i² as a second-order cone program, with Clarabel.
+
+    Variables x = (b_1…b_{N−1}, c_1…c_{N−1}, t_0…t_{N−1}, e_0…e_{N−1}) with c_k ≤ √b_k (tight at
+    the optimum), y_k = c_k + c_{k+1} (c_0 = c_N = 0):
+
+        minimise Σ t_k + e_k   s.t.  c_k² ≤ b_k,  t_k y_k ≥ 2Δσ_k,
+                                     e_k y_k ≥ Δσ_k Σ_i w_i (u_{k⁺,i}² + u_{(k+1)⁻,i}²),
+                                     u_min ≤ u ≤ u_max,  0 ≤ b ≤ b_upper,
+
+    i.e. Σ Δt_k (1 + ½ Σ w (u_{k⁺}² + u_{(k+1)⁻}²)). Rotated cones x·y ≥ ‖v‖² are written as
+    ‖(2v, x − y)‖ ≤ x + y. The damping torque is linearised at ``z_lin``.
+    """
+    import clarabel
+
+    p = disc.problem
+    big_n, n = p.segments, p.dof
+    nz = big_n - 1
+    iz, ic, it, ie = 0, nz, 2 * nz, 2 * nz + big_n
+    nx = 2 * nz + 2 * big_n
+    k_mat, u0 = disc.k, disc.u0
+    if disc.has_damping and z_lin is not None:
+        k_mat = disc.torque_jacobian(z_lin)
+        u0 = disc.torque(z_lin) - k_mat @ z_lin
+    ub = p.b_upper[1:-1]
+    finite = np.flatnonzero(np.isfinite(ub))
+    energy = bool(np.any(weights > 0))
+    ds = disc.ds
+    seg = np.arange(big_n)
+    trip_r: list[NDArray[np.int64]] = []
+    trip_c: list[NDArray[np.int64]] = []
+    trip_v: list[NDArray[np.float64]] = []
+    rhs: list[NDArray[np.float64]] = []
+    row0 = 0
+
+    def put(r: NDArray, c: NDArray, v: NDArray) -> None:
+        trip_r.append(np.asarray(r, dtype=np.int64) + row0)
+        trip_c.append(np.asarray(c, dtype=np.int64))
+        trip_v.append(np.asarray(v, dtype=float))
+
+    # 1. torque limits, b ≥ 0 and b ≤ b_upper: A x + s = rhs, s ≥ 0
+    kk = k_mat.tocoo()
+    m_rows = k_mat.shape[0]
+    put(kk.row, kk.col + iz, kk.data)
+    put(kk.row + m_rows, kk.col + iz, -kk.data)
+    put(2 * m_rows + np.arange(nz), iz + np.arange(nz), -np.ones(nz))
+    put(2 * m_rows + nz + np.arange(finite.size), iz + finite, np.ones(finite.size))
+    rhs += [disc.upper - u0, u0 - disc.lower, np.zeros(nz), ub[finite]]
+    n_lin = 2 * m_rows + nz + finite.size
+    cones: list[object] = [clarabel.NonnegativeConeT(n_lin)]
+    row0 += n_lin
+
+    # 2. c_k² ≤ b_k ⇔ ‖(2c_k, b_k − 1)‖ ≤ b_k + 1, knots 1 … N−1
+    kn = np.arange(nz)
+    put(3 * kn, iz + kn, -np.ones(nz))
+    put(3 * kn + 1, ic + kn, -2.0 * np.ones(nz))
+    put(3 * kn + 2, iz + kn, -np.ones(nz))
+    rhs.append(np.tile([1.0, 0.0, -1.0], nz))
+    cones += [clarabel.SecondOrderConeT(3)] * nz
+    row0 += 3 * nz
+
+    # y_k = c_k + c_{k+1} (c_0 = c_N = 0): the c columns of segment k
+    y_seg = np.concatenate([seg[seg >= 1], seg[seg <= big_n - 2]])
+    y_col = np.concatenate([seg[seg >= 1] - 1, seg[seg <= big_n - 2]]) + ic
+
+    def cone_xy(width: int, var: int) -> None:
+        """Rows 0 and last of per-segment cones ‖(…, x − y)‖ ≤ x + y with x = var_k."""
+        put(width * seg, var + seg, -np.ones(big_n))
+        put(width * y_seg, y_col, -np.ones(y_seg.size))
+        put(width * seg + width - 1, var + seg, -np.ones(big_n))
+        put(width * y_seg + width - 1, y_col, np.ones(y_seg.size))
+
+    # 3. t_k y_k ≥ 2Δσ_k ⇔ ‖(2√(2Δσ_k), t_k − y_k)‖ ≤ t_k + y_k
+    cone_xy(3, it)
+    rhs.append(np.column_stack([np.zeros(big_n), 2.0 * np.sqrt(2.0 * ds), np.zeros(big_n)]).ravel())
+    cones += [clarabel.SecondOrderConeT(3)] * big_n
+    row0 += 3 * big_n
+
+    # 4. e_k y_k ≥ Δσ_k Σ w (u_{k+}² + u_{(k+1)-}²) ⇔ ‖(2v, e_k − y_k)‖ ≤ e_k + y_k, v = √(Δσ w) u
+    q_vec = np.zeros(nx)
+    q_vec[it : it + big_n] = 1.0
+    if energy:
+        width = 2 + 2 * n
+        cone_xy(width, ie)
+        joint, r = np.divmod(kk.row, 2 * big_n)
+        k_of = np.where(r < big_n, r, r - big_n)
+        slot = np.where(r < big_n, joint, n + joint)
+        scale = 2.0 * np.sqrt(ds[k_of] * weights[joint])
+        put(width * k_of + 1 + slot, kk.col + iz, -scale * kk.data)
+        e_rhs = np.zeros((big_n, width))
+        all_rows = np.arange(m_rows)
+        joint_all, r_all = np.divmod(all_rows, 2 * big_n)
+        k_all = np.where(r_all < big_n, r_all, r_all - big_n)
+        slot_all = np.where(r_all < big_n, joint_all, n + joint_all)
+        e_rhs[k_all, 1 + slot_all] = 2.0 * np.sqrt(ds[k_all] * weights[joint_all]) * u0
+        rhs.append(e_rhs.ravel())
+        cones += [clarabel.SecondOrderConeT(width)] * big_n
+        row0 += width * big_n
+        q_vec[ie : ie + big_n] = 1.0
+    else:  # no energy: pin e = 0
+        put(np.arange(big_n), ie + seg, np.ones(big_n))
+        rhs.append(np.zeros(big_n))
+        cones.append(clarabel.ZeroConeT(big_n))
+        row0 += big_n
+    a_all = sp.csc_matrix(
+        (np.concatenate(trip_v), (np.concatenate(trip_r), np.concatenate(trip_c))), shape=(row0, nx)
+    )
+    b_all = np.concatenate(rhs)
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = tolerance
+    settings.max_iter = 200
+    solver = clarabel.DefaultSolver(sp.csc_matrix((nx, nx)), q_vec, a_all, b_all, cones, settings)
+    sol = solver.solve()
+    return np.maximum(np.asarray(sol.x)[iz : iz + nz], 0.0), sol
+
+
 def solve_timing(
     problem: TimingProblem,
     cost: Cost,
@@ -468,7 +590,7 @@ def solve_timing(
         # f0 = 1: certify the greatest profile by the KKT conditions of min Σ Δt (an LP in the
         # descent direction: no feasible z decreases the linearised time).
         _, grad = disc.objective(z_max, TimeCost())
-        z_best, best = _lp(disc, grad, z_max)
+        _, best = _lp(disc, grad, z_max)
         here = float(grad @ z_max)
         if here - best <= 1e-9 * abs(here):
             return TimingSolution(
@@ -479,12 +601,62 @@ def solve_timing(
                 iterations=rounds + 1,
                 message="greatest feasible speed profile; KKT conditions certified by an LP",
             )
+    if weights is not None:
+        return _solve_convex(disc, cost, weights, z_max, tolerance)
+    return _solve_nlp(disc, cost, z_max, tolerance, max_iterations)
 
+
+def _solve_convex(
+    disc: _Discretisation,
+    cost: Cost,
+    weights: NDArray[np.float64],
+    z_max: NDArray[np.float64],
+    tolerance: float,
+) -> TimingSolution:
+    """f0 = 1 + Σ w u²: the SOCP, repeated with the damping re-linearised until a fixed point."""
+    z, sol = _socp(disc, weights, z_max, tolerance)
+    iterations, rounds = int(sol.iterations), 1
+    if disc.has_damping:
+        for rounds in range(2, 31):
+            z_new, sol = _socp(disc, weights, np.maximum(z, 1e-12 * z.max()), tolerance)
+            iterations += int(sol.iterations)
+            change = np.max(np.abs(z_new - z)) / max(z_new.max(), 1e-300)
+            z = z_new
+            if change < 1e-7:
+                break
+    status = str(sol.status)
+    if "Solved" not in status:
+        raise SolverError(f"Clarabel did not solve the stage-1 SOCP: {status}", status=status)
+    z = _into_limits(disc, z)
+    return TimingSolution(
+        b=disc.b(z),
+        objective=disc.objective(z, cost)[0],
+        status="optimal",
+        solver="clarabel-socp",
+        iterations=iterations,
+        message=f"{status} in {rounds} round(s)" + (" (damping linearised)" if disc.has_damping else ""),
+    )
+
+
+def _solve_nlp(
+    disc: _Discretisation,
+    cost: Cost,
+    z_max: NDArray[np.float64],
+    tolerance: float,
+    max_iterations: int,
+) -> TimingSolution:
+    """Any f0: SciPy's trust-constr interior-point method (a local optimum), from 0.7 b_max."""
+    problem = disc.problem
+    # scale the cost to O(1) at the start and every torque row by its limit range
+    x0 = 0.7 * z_max  # strictly inside: u(0.7 b) = g + 0.7 (u(b) − g)
+    j_scale = 1.0 / disc.objective(x0, cost)[0]
+    row = 2.0 / (disc.upper - disc.lower)
     ub = disc.problem.b_upper[1:-1]
     lb = np.full(ub.size, 1e-10)
 
     def fun(x: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
-        return disc.objective(x, cost)
+        value, grad = disc.objective(x, cost)
+        return value * j_scale, grad * j_scale
 
     def hess(x: NDArray[np.float64]) -> sp.csr_matrix:
         return _tridiagonal_hessian(lambda y: fun(y)[1], x, fun(x)[1])
@@ -495,15 +667,20 @@ def solve_timing(
             # ∂²(d·√b)/∂b² = −d / (4 b^{3/2}) on the sample's own knot
             b = disc.b(x)
             col = np.tile(disc.node, problem.dof)
-            w = v * disc.damp * -0.25 * np.where(b[col] > 0, b[col], np.inf) ** -1.5
+            w = v * row * disc.damp * -0.25 * np.where(b[col] > 0, b[col], np.inf) ** -1.5
             return sp.diags(np.bincount(col, weights=w, minlength=b.size)[1:-1])
 
         constraint = NonlinearConstraint(
-            disc.torque, disc.lower, disc.upper, jac=disc.torque_jacobian, hess=c_hess
+            lambda x: row * disc.torque(x),
+            row * disc.lower,
+            row * disc.upper,
+            jac=lambda x: sp.diags(row) @ disc.torque_jacobian(x),
+            hess=c_hess,
         )
     else:
-        constraint = LinearConstraint(disc.k, disc.lower - disc.u0, disc.upper - disc.u0)
-    x0 = 0.7 * z_max  # strictly inside: u(0.7 b) = g + 0.7 (u(b) − g)
+        constraint = LinearConstraint(
+            sp.diags(row) @ disc.k, row * (disc.lower - disc.u0), row * (disc.upper - disc.u0)
+        )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # trust-constr warns about its own heuristics
         res = minimize(
@@ -519,6 +696,7 @@ def solve_timing(
                 "xtol": tolerance,
                 "barrier_tol": tolerance,
                 "maxiter": max_iterations,
+                "initial_barrier_parameter": 1e-4,
             },
         )
     if not np.all(np.isfinite(res.x)):
@@ -532,6 +710,51 @@ def solve_timing(
         iterations=int(res.nit),
         message=str(res.message),
     )
+
+
+def _within_segments(
+    robot: Robot,
+    path: Path,
+    problem: TimingProblem,
+    b: NDArray[np.float64],
+    points: int = 8,
+) -> NDArray[np.float64]:
+    """Scale b by the largest α ≤ 1 that keeps the torque within the limits inside segments too.
+
+    The limits are imposed at both ends of every segment; in between, the torque along the exact
+    path can bulge out by O(Δs²) (or O(√Δs) next to a rest end with damping). It is checked at
+    ``points`` interior points of every segment and closely next to both rest ends, and
+    since u(αb) = g + α(m a + c b) + √α dλ, a uniform α (found by bisection) restores the limits
+    at the cost of a relative slow-down of the order of the bulge.
+    """
+    frac = np.arange(1, points + 1) / (points + 1)
+    ds = np.diff(problem.s)
+    big_n = problem.segments
+    # at rest b ∝ σ, so a damping torque d√b rises like √σ: look closely next to both ends
+    near = np.geomspace(1e-6, 0.5 / (points + 1), 8)
+    seg = np.concatenate([np.repeat(np.arange(big_n), points), np.zeros(8, int), np.full(8, big_n - 1)])
+    where = np.concatenate([np.tile(frac, big_n), near, 1.0 - near])
+    sigma = problem.s[seg] + where * ds[seg]
+    s = sigma * path.s_end
+    coef = robot.path_coefficients(
+        path(s, 0), path(s, 1) * path.s_end, path(s, 2) * path.s_end**2
+    )
+    acc = (np.diff(b) / (2.0 * ds))[seg, None]
+    bb = (b[seg] + where * (b[seg + 1] - b[seg]))[:, None]
+    lin = coef.m * acc + coef.c * bb
+    damp = coef.d * np.sqrt(bb)
+
+    def excess(alpha: float) -> float:
+        u = coef.g + alpha * lin + np.sqrt(alpha) * damp
+        return float(np.max(np.maximum(u - problem.u_upper, problem.u_lower - u)))
+
+    if excess(1.0) <= 0.0:
+        return b
+    lo, hi = 0.0, 1.0
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if excess(mid) <= 0.0 else (lo, mid)
+    return lo * b
 
 
 def optimal_timing(
@@ -574,9 +797,10 @@ def optimal_timing(
     cost = TimeCost() if cost is None else cost
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
     sol = solve_timing(problem, cost, tolerance=tolerance)
+    b = _within_segments(robot, path, problem, sol.b)
     # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
     traj = Trajectory(
-        path, problem.s * path.s_end, sol.b * path.s_end**2, robot.inverse_dynamics_batch
+        path, problem.s * path.s_end, b * path.s_end**2, robot.inverse_dynamics_batch
     )
     return TimingResult(
         trajectory=traj,
