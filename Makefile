@@ -33,6 +33,7 @@ test: setup
 
 bench: setup
 	$(BIN)/python scripts/bench_dynamics.py
+	$(BIN)/python scripts/bench_timing.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
