@@ -131,7 +131,9 @@ class CallableCost:
         except NearoptError:
             raise
         except Exception as exc:  # the user's code: report it as ours, with its message
-            raise NearoptError(f"the cost {self.name!r} raised {type(exc).__name__}: {exc}") from exc
+            raise NearoptError(
+                f"the cost {self.name!r} raised {type(exc).__name__}: {exc}"
+            ) from exc
         if value.shape != (q.shape[0],):
             raise NearoptError(
                 f"the cost {self.name!r} returned shape {value.shape}, expected ({q.shape[0]},)"

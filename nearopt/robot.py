@@ -502,8 +502,8 @@ class Robot:
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """A = ∂f/∂x (2n, 2n) and B = ∂f/∂u (2n, n) of ẋ = f(x, u) (eqs. 24-26).
 
-        From Pinocchio's analytic ABA derivatives, evaluated at the effective torque u − Dθ̇, with the
-        damping's −H⁻¹D added to ∂θ̈/∂θ̇.
+        From Pinocchio's analytic ABA derivatives, evaluated at the effective torque u − Dθ̇,
+        with the damping's −H⁻¹D added to ∂θ̈/∂θ̇.
         """
         q = self.check_configuration(q)
         qd = self._joint_array(qd, "velocity")
@@ -718,5 +718,6 @@ def _frame_id(model: pin.Model, frame: str, robot: str) -> int:
 
 def _default_tip(model: pin.Model) -> str:
     last = model.njoints - 1
-    bodies = [f.name for f in model.frames if f.type == pin.FrameType.BODY and f.parentJoint == last]
+    body = pin.FrameType.BODY
+    bodies = [f.name for f in model.frames if f.type == body and f.parentJoint == last]
     return bodies[-1] if bodies else model.frames[-1].name

@@ -24,23 +24,26 @@ u is affine in b and u²/(√b_k + √b_{k+1}) is convex, so its global optimum 
 
 1. Feasibility is decided exactly: some timing exists iff gravity alone is within the limits at
    every knot (b → 0 gives u → g); otherwise :class:`InfeasiblePathError` says where.
-2. HiGHS (``scipy.optimize.linprog``) maximises Σ b_k: the greatest feasible speed profile, which is
-   the time-optimal timing when the feasible set is a lattice (as for the pairwise constraints here).
-   For f0 = 1 a second LP checks the KKT conditions at that profile (a certificate of optimality);
-3. otherwise SciPy's ``trust-constr`` interior-point method solves the NLP from there, with the
-   exact gradient and the (tridiagonal) Hessian from differences of that gradient.
+2. HiGHS (``scipy.optimize.linprog``) maximises Σ b_k: the greatest feasible speed profile, which
+   is the time-optimal timing when the feasible set is a lattice (as for pairwise constraints).
+   For f0 = 1 a second LP checks the KKT conditions at that profile (a certificate of optimality).
+3. For w ≠ 0 the problem is a second-order cone program (see :func:`_socp`), solved by Clarabel.
+4. Any other f0 (:class:`~nearopt.CallableCost`) goes to SciPy's ``trust-constr`` interior-point
+   method from the greatest profile, with the exact gradient and the (tridiagonal) Hessian from
+   differences of that gradient: a local optimum.
 
-Damping makes u depend on λ = √b. It is handled, not dropped: the LPs linearise √b at the previous
-profile until a fixed point (where the linearisation is exact), and ``trust-constr`` takes the
-torque limits as nonlinear constraints. The problem is then not convex in general (local optimum).
-The answer is finally scaled into the limits (b → αb, α ≤ 1) if the solver's tolerance left any
-torque sample outside them.
+Damping makes u depend on λ = √b. It is handled, not dropped: the LPs and the SOCP linearise √b at
+the previous profile until a fixed point (where the linearisation is exact), and ``trust-constr``
+takes the torque limits as nonlinear constraints. The problem is then not convex in general (local
+optimum). The answer is finally scaled into the limits (b → αb, α ≤ 1) if the solver's tolerance
+left any torque sample outside them, at the knots or inside the segments.
 """
 
 from __future__ import annotations
 
 import time
 import warnings
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -390,43 +393,63 @@ def _lp(
     return np.maximum(res.x, 0.0), float(res.fun)
 
 
+def _relinearise(
+    disc: _Discretisation,
+    solve: Callable[[NDArray[np.float64]], NDArray[np.float64]],
+    z: NDArray[np.float64],
+    *,
+    tolerance: float,
+    max_rounds: int,
+) -> tuple[NDArray[np.float64], int]:
+    """Re-solve with the damping linearised at the last answer until it stops moving.
+
+    At the fixed point the tangent of √b is taken where it touches, so the constraints hold exactly.
+    Returns the answer and the number of solves, the first (given as ``z``) included.
+    """
+    rounds = 1
+    while disc.has_damping and rounds < max_rounds:
+        z_new = solve(np.maximum(z, 1e-12 * max(z.max(), 1e-12)))
+        rounds += 1
+        change = np.max(np.abs(z_new - z)) / max(z_new.max(), 1e-300)
+        z = z_new
+        if change < tolerance:
+            break
+    return z, rounds
+
+
 def _greatest_profile(disc: _Discretisation) -> tuple[NDArray[np.float64], int]:
     """The greatest feasible b (maximise Σ b), damping linearised to a fixed point."""
     weights = -np.ones(disc.problem.segments - 1)
     z, _ = _lp(disc, weights)
-    rounds = 1
-    if disc.has_damping:
-        for rounds in range(2, 52):
-            z_new, _ = _lp(disc, weights, np.maximum(z, 1e-12 * max(z.max(), 1e-12)))
-            change = np.max(np.abs(z_new - z)) / max(z_new.max(), 1e-300)
-            z = z_new
-            if change < 1e-10:
-                break
-    return z, rounds
+    return _relinearise(
+        disc, lambda z_lin: _lp(disc, weights, z_lin)[0], z, tolerance=1e-10, max_rounds=51
+    )
 
 
-def _into_limits(disc: _Discretisation, z: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Scale b by the largest α ≤ 1 that puts every torque sample within the limits.
+def _largest_scale(excess: Callable[[float], float]) -> float:
+    """The largest α ∈ [0, 1] with excess(α) ≤ 0 (1 if feasible as it is), by bisection.
 
-    Without damping u(αb) = g + α(u(b) − g), a convex combination of two feasible torques, so the
-    scaled profile is feasible; with damping the same α is found by bisection.
+    Without damping the torque is u(αb) = g + α(u(b) − g), a convex combination of gravity and a
+    torque within the limits, so every α below a feasible one is feasible too.
     """
-
-    def violation(zz: NDArray[np.float64]) -> float:
-        u = disc.torque(zz)
-        return float(max(np.max(u - disc.upper), np.max(disc.lower - u)))
-
-    z = np.minimum(z, disc.problem.b_upper[1:-1])
-    if violation(z) <= 0.0:
-        return z
+    if excess(1.0) <= 0.0:
+        return 1.0
     lo, hi = 0.0, 1.0
     for _ in range(60):
         mid = 0.5 * (lo + hi)
-        if violation(mid * z) <= 0.0:
-            lo = mid
-        else:
-            hi = mid
-    return lo * z
+        lo, hi = (mid, hi) if excess(mid) <= 0.0 else (lo, mid)
+    return lo
+
+
+def _into_limits(disc: _Discretisation, z: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Scale b by the largest α ≤ 1 that puts every torque sample within the limits."""
+    z = np.minimum(z, disc.problem.b_upper[1:-1])
+
+    def excess(alpha: float) -> float:
+        u = disc.torque(alpha * z)
+        return float(max(np.max(u - disc.upper), np.max(disc.lower - u)))
+
+    return _largest_scale(excess) * z
 
 
 def _socp(
@@ -614,17 +637,16 @@ def _solve_convex(
     tolerance: float,
 ) -> TimingSolution:
     """f0 = 1 + Σ w u²: the SOCP, repeated with the damping re-linearised until a fixed point."""
-    z, sol = _socp(disc, weights, z_max, tolerance)
-    iterations, rounds = int(sol.iterations), 1
-    if disc.has_damping:
-        for rounds in range(2, 31):
-            z_new, sol = _socp(disc, weights, np.maximum(z, 1e-12 * z.max()), tolerance)
-            iterations += int(sol.iterations)
-            change = np.max(np.abs(z_new - z)) / max(z_new.max(), 1e-300)
-            z = z_new
-            if change < 1e-7:
-                break
-    status = str(sol.status)
+    solutions = []
+
+    def socp(z_lin: NDArray[np.float64]) -> NDArray[np.float64]:
+        z_new, sol = _socp(disc, weights, z_lin, tolerance)
+        solutions.append(sol)
+        return z_new
+
+    z, rounds = _relinearise(disc, socp, socp(z_max), tolerance=1e-7, max_rounds=30)
+    iterations = sum(int(sol.iterations) for sol in solutions)
+    status = str(solutions[-1].status)
     if "Solved" not in status:
         raise SolverError(f"Clarabel did not solve the stage-1 SOCP: {status}", status=status)
     z = _into_limits(disc, z)
@@ -634,7 +656,8 @@ def _solve_convex(
         status="optimal",
         solver="clarabel-socp",
         iterations=iterations,
-        message=f"{status} in {rounds} round(s)" + (" (damping linearised)" if disc.has_damping else ""),
+        message=f"{status} in {rounds} round(s)"
+        + (" (damping linearised)" if disc.has_damping else ""),
     )
 
 
@@ -732,7 +755,9 @@ def _within_segments(
     big_n = problem.segments
     # at rest b ∝ σ, so a damping torque d√b rises like √σ: look closely next to both ends
     near = np.geomspace(1e-6, 0.5 / (points + 1), 8)
-    seg = np.concatenate([np.repeat(np.arange(big_n), points), np.zeros(8, int), np.full(8, big_n - 1)])
+    seg = np.concatenate(
+        [np.repeat(np.arange(big_n), points), np.zeros(8, int), np.full(8, big_n - 1)]
+    )
     where = np.concatenate([np.tile(frac, big_n), near, 1.0 - near])
     sigma = problem.s[seg] + where * ds[seg]
     s = sigma * path.s_end
@@ -748,13 +773,7 @@ def _within_segments(
         u = coef.g + alpha * lin + np.sqrt(alpha) * damp
         return float(np.max(np.maximum(u - problem.u_upper, problem.u_lower - u)))
 
-    if excess(1.0) <= 0.0:
-        return b
-    lo, hi = 0.0, 1.0
-    for _ in range(50):
-        mid = 0.5 * (lo + hi)
-        lo, hi = (mid, hi) if excess(mid) <= 0.0 else (lo, mid)
-    return lo * b
+    return _largest_scale(excess) * b
 
 
 def optimal_timing(

@@ -63,7 +63,8 @@ class Trajectory:
         self.b = b
         self.lam = np.sqrt(b)
         self.a = np.diff(b) / (2.0 * np.diff(s))
-        self.t = np.concatenate([[0.0], np.cumsum(2.0 * np.diff(s) / (self.lam[:-1] + self.lam[1:]))])
+        dt = 2.0 * np.diff(s) / (self.lam[:-1] + self.lam[1:])
+        self.t = np.concatenate([[0.0], np.cumsum(dt)])
         self._inverse_dynamics = inverse_dynamics
         for arr in (self.s, self.b, self.lam, self.a, self.t):
             arr.setflags(write=False)
@@ -90,19 +91,20 @@ class Trajectory:
 
     def __call__(self, t: ArrayLike, order: Literal[0, 1, 2] = 0) -> NDArray[np.float64]:
         """θ(t) (order 0), θ̇(t) (1) or θ̈(t) (2), shape (M, n); at a knot, the segment after it."""
+        if order not in (0, 1, 2):
+            raise ValueError(f"order must be 0, 1 or 2, got {order}")
+        return self.states(t)[order]
+
+    def states(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """θ(t), θ̇(t), θ̈(t) in one pass, each of shape (M, n)."""
         s, sd, sdd = self.path_parameter(t)
-        if order == 0:
-            return self.path(s, 0)
         d1 = self.path(s, 1)
-        if order == 1:
-            return d1 * sd[:, None]
-        if order == 2:
-            return self.path(s, 2) * (sd**2)[:, None] + d1 * sdd[:, None]
-        raise ValueError(f"order must be 0, 1 or 2, got {order}")
+        qdd = self.path(s, 2) * (sd**2)[:, None] + d1 * sdd[:, None]
+        return self.path(s, 0), d1 * sd[:, None], qdd
 
     def torque(self, t: ArrayLike) -> NDArray[np.float64]:
         """u(t) by inverse dynamics (eq. 1) [N·m or N], shape (M, n)."""
-        return self._inverse_dynamics(self(t, 0), self(t, 1), self(t, 2))
+        return self._inverse_dynamics(*self.states(t))
 
     def sample(self, rate: float) -> dict[str, NDArray[np.float64]]:
         """Samples at ``rate`` [Hz] from 0 to t_e inclusive: t, q, qd, qdd, tau.
@@ -118,7 +120,7 @@ class Trajectory:
         t = np.arange(count) / rate
         if t[-1] < self.duration:
             t = np.append(t, self.duration)
-        q, qd, qdd = self(t, 0), self(t, 1), self(t, 2)
+        q, qd, qdd = self.states(t)
         return {"t": t, "q": q, "qd": qd, "qdd": qdd, "tau": self._inverse_dynamics(q, qd, qdd)}
 
     def integrate(
@@ -137,6 +139,6 @@ class Trajectory:
         dt = np.diff(self.t)
         t = (self.t[:-1, None] + 0.5 * dt[:, None] * (x[None, :] + 1.0)).ravel()
         # the right-continuous evaluation picks the segment each node lies in (nodes are interior)
-        q, qd, qdd = self(t, 0), self(t, 1), self(t, 2)
+        q, qd, qdd = self.states(t)
         values = np.asarray(f0(q, qd, self._inverse_dynamics(q, qd, qdd))).reshape(dt.size, points)
         return float(np.sum(0.5 * dt * (values @ w)))
