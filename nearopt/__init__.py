@@ -15,7 +15,8 @@ from .errors import (
     SolverError,
     URDFError,
 )
-from .path import Path, SplinePath, StraightPath
+from .path import BSplinePath, Path, SplinePath, StraightPath
+from .planner import Iteration, PlanResult, plan
 from .robot import JointLimits, PathCoefficients, Robot
 from .timing import TimingResult, optimal_timing
 from .trajectory import Trajectory
@@ -24,12 +25,16 @@ __all__ = [
     "Robot",
     "Path",
     "StraightPath",
+    "BSplinePath",
     "SplinePath",
     "Cost",
     "TimeCost",
     "TorqueCost",
     "CallableCost",
     "optimal_timing",
+    "plan",
+    "PlanResult",
+    "Iteration",
     "TimingResult",
     "Trajectory",
     "JointLimits",

@@ -10,14 +10,14 @@ from __future__ import annotations
 from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
 import numpy as np
-from scipy.interpolate import CubicSpline
+from scipy.interpolate import BSpline, CubicSpline
 
 from .errors import ConfigurationError
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Path", "StraightPath", "SplinePath"]
+__all__ = ["Path", "StraightPath", "SplinePath", "BSplinePath"]
 
 Order = Literal[0, 1, 2]
 
@@ -130,6 +130,70 @@ class SplinePath:
     @property
     def dof(self) -> int:
         return int(self._spline.c.shape[-1])
+
+    def __call__(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        return np.asarray(self._spline(s, nu=order))
+
+
+class BSplinePath:
+    """A clamped cubic B-spline θ(s) = Σ_j B_j(s) c_j on s ∈ [0, 1] with uniform interior knots.
+
+    The path stage 2 optimises: θ(0) = c_0 and θ(1) = c_last exactly, and by the convex-hull
+    property θ(s) stays within any box that holds every control point (how joint position limits
+    are kept). Control points placed on a line at the Greville abscissae give that line exactly.
+
+    Parameters
+    ----------
+    control_points
+        c_0 … c_{K+1} [rad or m], shape (K + 2, n), K ≥ 2 interior points.
+    """
+
+    degree = 3
+
+    def __init__(self, control_points: ArrayLike) -> None:
+        c = np.array(control_points, dtype=float)
+        if c.ndim != 2 or c.shape[0] < 4 or not np.all(np.isfinite(c)):
+            raise ConfigurationError(
+                f"control_points must be finite with shape (K + 2, n), K ≥ 2; got {c.shape}"
+            )
+        c.flags.writeable = False
+        self.control_points = c
+        self.knots = self.knot_vector(c.shape[0])
+        self._spline = BSpline(self.knots, c, self.degree)
+
+    @classmethod
+    def knot_vector(cls, count: int) -> NDArray[np.float64]:
+        """The clamped uniform knot vector for ``count`` control points."""
+        k = cls.degree
+        return np.concatenate([np.zeros(k), np.linspace(0.0, 1.0, count - k + 1), np.ones(k)])
+
+    @classmethod
+    def line(cls, theta0: ArrayLike, thetae: ArrayLike, interior: int) -> BSplinePath:
+        """The straight line of eqs. (28)-(29) with ``interior`` free control points."""
+        a = _as_joint_vector(theta0, "theta0")
+        e = _as_joint_vector(thetae, "thetae")
+        return cls(a + np.outer(cls.greville(interior + 2), e - a))
+
+    @classmethod
+    def greville(cls, count: int) -> NDArray[np.float64]:
+        """Greville abscissae (knot averages) of the ``count`` basis functions."""
+        t = cls.knot_vector(count)
+        return np.array([t[j + 1 : j + cls.degree + 1].mean() for j in range(count)])
+
+    def basis(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
+        """∂θ^(order)(s) / ∂c_j, the basis functions' values, shape (len(s), K + 2)."""
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        count = self.control_points.shape[0]
+        return np.asarray(BSpline(self.knots, np.eye(count), self.degree)(s, nu=order))
+
+    @property
+    def s_end(self) -> float:
+        return 1.0
+
+    @property
+    def dof(self) -> int:
+        return self.control_points.shape[1]
 
     def __call__(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
         s = np.atleast_1d(np.asarray(s, dtype=float))

@@ -576,6 +576,25 @@ class Robot:
         dlam = np.asarray(dlam, dtype=float).reshape(-1, 1)
         return coef.m * (lam * dlam) + coef.c * lam**2 + coef.d * lam + coef.g
 
+    def inverse_dynamics_derivatives(
+        self, q: ArrayLike, qd: ArrayLike, qdd: ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """∂u/∂θ, ∂u/∂θ̇ (damping included) and ∂u/∂θ̈ = H of u = ID(θ, θ̇, θ̈) at N samples.
+
+        From Pinocchio's analytic RNEA derivatives; q, qd, qdd of shape (N, n); each output is
+        (N, n, n) with [k, i, j] = ∂u_i/∂x_j at sample k.
+        """
+        q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
+        self._check_batch(q, qd, qdd)
+        count, n = q.shape
+        du_dq, du_dv, h = (np.empty((count, n, n)) for _ in range(3))
+        for k in range(count):
+            du_dq[k], du_dv[k], h[k] = pin.computeRNEADerivatives(
+                self._model, self._data, q[k], qd[k], qdd[k]
+            )
+        du_dv += np.diag(self.damping)
+        return du_dq, du_dv, h
+
     # ------------------------------------------------------------------ kinematics
     def frame_position(self, q: ArrayLike, frame: str | None = None) -> NDArray[np.float64]:
         """World position of a frame (default: the tip) [m]; q of shape (n,) or (N, n)."""

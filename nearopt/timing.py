@@ -44,7 +44,7 @@ from __future__ import annotations
 import time
 import warnings
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -82,8 +82,8 @@ class TimingProblem:
         Knots of the normalised path parameter σ = s / s_e, 0 = σ_0 < … < σ_N = 1, shape (N+1,).
         The kernel works in σ so that b = (dσ/dt)² is of the order of 1/t_e² whatever the unit
         of s; J does not depend on that choice.
-    theta, dtheta
-        θ(σ_k) [rad] and dθ/dσ [rad] at the knots, shape (N+1, n).
+    theta, dtheta, ddtheta
+        θ(σ_k) [rad], dθ/dσ and d²θ/dσ² [rad] at the knots, shape (N+1, n).
     coef
         m, c, d, g of eq. (10) with respect to σ at the knots, each (N+1, n).
     u_lower, u_upper
@@ -92,16 +92,22 @@ class TimingProblem:
         Upper bound on b = (dσ/dt)² at each knot from the joint speed limits (inf if none), (N+1,).
     joint_names
         Names of the n joints, for messages.
+    margin
+        Optional torque margins [N·m] at the samples, shape (2N, n): rows 0 … N−1 at the start of
+        segments 0 … N−1, rows N … 2N−1 at their ends. Stage 1 keeps each sample this far inside
+        both limits; :func:`optimal_timing` sets them where the torque bulges out between samples.
     """
 
     s: NDArray[np.float64]
     theta: NDArray[np.float64]
     dtheta: NDArray[np.float64]
+    ddtheta: NDArray[np.float64]
     coef: PathCoefficients
     u_lower: NDArray[np.float64]
     u_upper: NDArray[np.float64]
     b_upper: NDArray[np.float64]
     joint_names: tuple[str, ...]
+    margin: NDArray[np.float64] | None = None
 
     @property
     def segments(self) -> int:
@@ -181,7 +187,7 @@ def build_timing_problem(
     grid: int = 200,
     velocity_limits: bool = True,
 ) -> TimingProblem:
-    """Sample a path on a uniform grid and collect what stage 1 needs.
+    """Sample a path on a grid clustered at the rest ends and collect what stage 1 needs.
 
     Parameters
     ----------
@@ -198,7 +204,7 @@ def build_timing_problem(
         raise ConfigurationError(f"grid must be an integer ≥ 2, got {grid!r}")
     if path.dof != robot.n:
         raise ConfigurationError(f"the path has {path.dof} joints, {robot.name} has {robot.n}")
-    sigma = np.linspace(0.0, 1.0, grid + 1)
+    sigma = _grid(grid)
     s = sigma * path.s_end
     theta = path(s, 0)
     dtheta = path(s, 1) * path.s_end  # d/dσ = s_e d/ds
@@ -213,6 +219,7 @@ def build_timing_problem(
         s=sigma,
         theta=theta,
         dtheta=dtheta,
+        ddtheta=ddtheta,
         coef=coef,
         u_lower=np.array(robot.limits.effort_lower),
         u_upper=np.array(robot.limits.effort_upper),
@@ -256,6 +263,9 @@ class _Discretisation:
         self.has_damping = bool(np.any(self.damp != 0.0))
         self.lower = np.repeat(p.u_lower, 2 * big_n)
         self.upper = np.repeat(p.u_upper, 2 * big_n)
+        if p.margin is not None:
+            self.lower = self.lower + p.margin.T.ravel()
+            self.upper = self.upper - p.margin.T.ravel()
 
     def b(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         return np.concatenate([[0.0], z, [0.0]])
@@ -735,45 +745,72 @@ def _solve_nlp(
     )
 
 
-def _within_segments(
-    robot: Robot,
-    path: Path,
-    problem: TimingProblem,
-    b: NDArray[np.float64],
-    points: int = 8,
-) -> NDArray[np.float64]:
-    """Scale b by the largest α ≤ 1 that keeps the torque within the limits inside segments too.
+class _Between:
+    """The torque between the samples: inside every segment and closely next to both rest ends.
 
     The limits are imposed at both ends of every segment; in between, the torque along the exact
-    path can bulge out by O(Δs²) (or O(√Δs) next to a rest end with damping). It is checked at
-    ``points`` interior points of every segment and closely next to both rest ends, and
-    since u(αb) = g + α(m a + c b) + √α dλ, a uniform α (found by bisection) restores the limits
-    at the cost of a relative slow-down of the order of the bulge.
+    path can bulge out by O(Δs²) (or O(√Δs) next to a rest end with damping). It is evaluated at
+    ``points`` interior points of every segment and at points geometrically closer to σ = 0 and 1
+    (at rest b ∝ σ, so a damping torque d√b rises like √σ there).
     """
-    frac = np.arange(1, points + 1) / (points + 1)
-    ds = np.diff(problem.s)
+
+    def __init__(self, robot: Robot, path: Path, problem: TimingProblem, points: int = 8) -> None:
+        frac = np.arange(1, points + 1) / (points + 1)
+        self.ds = np.diff(problem.s)
+        big_n = problem.segments
+        near = np.geomspace(1e-6, 0.5 / (points + 1), 8)
+        self.seg = np.concatenate(
+            [np.repeat(np.arange(big_n), points), np.zeros(8, int), np.full(8, big_n - 1)]
+        )
+        self.where = np.concatenate([np.tile(frac, big_n), near, 1.0 - near])
+        s = (problem.s[self.seg] + self.where * self.ds[self.seg]) * path.s_end
+        self.coef = robot.path_coefficients(
+            path(s, 0), path(s, 1) * path.s_end, path(s, 2) * path.s_end**2
+        )
+        self.problem = problem
+
+    def excess(self, b: NDArray[np.float64], alpha: float = 1.0) -> NDArray[np.float64]:
+        """max(u − u_max, u_min − u) at every point for the profile αb, shape (M, n)."""
+        seg, c = self.seg, self.coef
+        acc = (np.diff(b) / (2.0 * self.ds))[seg, None]
+        bb = (b[seg] + self.where * (b[seg + 1] - b[seg]))[:, None]
+        u = c.g + alpha * (c.m * acc + c.c * bb) + np.sqrt(alpha) * c.d * np.sqrt(bb)
+        return np.maximum(u - self.problem.u_upper, self.problem.u_lower - u)
+
+    def per_segment(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The worst excess in every segment, per joint, shape (N, n)."""
+        worst = np.full((self.problem.segments, self.problem.dof), -np.inf)
+        np.maximum.at(worst, self.seg, self.excess(b))
+        return worst
+
+    def scale_into_limits(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
+        """b scaled by the largest α ≤ 1 that keeps every point within the limits.
+
+        Since u(αb) = g + α(m a + c b) + √α dλ, a uniform α (found by bisection) restores the
+        limits at the cost of a relative slow-down of the order of the bulge.
+        """
+        return _largest_scale(lambda alpha: float(np.max(self.excess(b, alpha)))) * b
+
+
+def _tighten(
+    problem: TimingProblem, between: _Between, b: NDArray[np.float64]
+) -> TimingProblem | None:
+    """The problem with larger margins at the samples of segments that bulge out; None if none do.
+
+    A segment whose torque exceeds a limit by e between its samples gets margin 1.5 e more at
+    both its samples (capped so gravity stays strictly inside the tightened limits).
+    """
+    worst = between.per_segment(b)
+    if not np.any(worst > 0):
+        return None
     big_n = problem.segments
-    # at rest b ∝ σ, so a damping torque d√b rises like √σ: look closely next to both ends
-    near = np.geomspace(1e-6, 0.5 / (points + 1), 8)
-    seg = np.concatenate(
-        [np.repeat(np.arange(big_n), points), np.zeros(8, int), np.full(8, big_n - 1)]
-    )
-    where = np.concatenate([np.tile(frac, big_n), near, 1.0 - near])
-    sigma = problem.s[seg] + where * ds[seg]
-    s = sigma * path.s_end
-    coef = robot.path_coefficients(
-        path(s, 0), path(s, 1) * path.s_end, path(s, 2) * path.s_end**2
-    )
-    acc = (np.diff(b) / (2.0 * ds))[seg, None]
-    bb = (b[seg] + where * (b[seg + 1] - b[seg]))[:, None]
-    lin = coef.m * acc + coef.c * bb
-    damp = coef.d * np.sqrt(bb)
-
-    def excess(alpha: float) -> float:
-        u = coef.g + alpha * lin + np.sqrt(alpha) * damp
-        return float(np.max(np.maximum(u - problem.u_upper, problem.u_lower - u)))
-
-    return _largest_scale(excess) * b
+    old = np.zeros((2 * big_n, problem.dof)) if problem.margin is None else problem.margin
+    add = 1.5 * np.maximum(worst, 0.0)
+    margin = old + np.vstack([add, add])
+    node = np.concatenate([np.arange(big_n), np.arange(1, big_n + 1)])
+    g = problem.coef.g[node]
+    room = np.minimum(problem.u_upper - g, g - problem.u_lower)
+    return replace(problem, margin=np.minimum(margin, 0.9 * room))
 
 
 def optimal_timing(
@@ -816,7 +853,14 @@ def optimal_timing(
     cost = TimeCost() if cost is None else cost
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
     sol = solve_timing(problem, cost, tolerance=tolerance)
-    b = _within_segments(robot, path, problem, sol.b)
+    between = _Between(robot, path, problem)
+    for _ in range(4):  # tighten the samples of segments that bulge out, then re-solve
+        tighter = _tighten(problem, between, sol.b)
+        if tighter is None:
+            break
+        problem = tighter
+        sol = solve_timing(problem, cost, tolerance=tolerance)
+    b = between.scale_into_limits(sol.b)  # what is left (if anything): a uniform slow-down
     # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
     traj = Trajectory(
         path, problem.s * path.s_end, b * path.s_end**2, robot.inverse_dynamics_batch
@@ -832,3 +876,16 @@ def optimal_timing(
         message=sol.message,
         wall_time=time.perf_counter() - t0,
     )
+
+
+
+def _grid(segments: int) -> NDArray[np.float64]:
+    """Knots σ_k = ½(1 − cos(πk/N)) (Chebyshev-Lobatto), O(1/N²) apart at the rest ends.
+
+    At rest b ∝ σ, so λ = √b varies fastest next to σ = 0 and 1: there the trapezoidal weights of
+    a segment's two torque samples are least accurate (the time spent in the first segment lies
+    mostly near its start). Clustering the knots there makes the discretised J converge much
+    faster than on a uniform grid (measured on the paper's example: 0.02 % instead of 0.3 % at
+    N = 200 on a curved path).
+    """
+    return 0.5 * (1.0 - np.cos(np.pi * np.arange(segments + 1) / segments))

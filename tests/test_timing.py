@@ -34,6 +34,7 @@ def test_kernel_time_optimal_bang_bang_closed_form() -> None:
         s=s,
         theta=theta_total * s[:, None],
         dtheta=theta_total * ones,
+        ddtheta=0 * ones,
         coef=PathCoefficients(m=inertia * theta_total * ones, c=0 * ones, d=0 * ones, g=0 * ones),
         u_lower=np.array([-u_max]),
         u_upper=np.array([u_max]),
