@@ -62,6 +62,8 @@ class Iteration:
         t_e of the iterate's optimal timing [s].
     wall_time
         Seconds since the planner started.
+    path
+        The iterate's path θ^j(s) (from θ0 to θe exactly).
     """
 
     index: int
@@ -69,6 +71,7 @@ class Iteration:
     alpha: float | None
     duration: float
     wall_time: float
+    path: Path
 
 
 @dataclass(frozen=True)
@@ -190,9 +193,16 @@ def plan(
     if position_limits:
         _check_within(robot, q0, "q0")
         _check_within(robot, qe, "qe")
+    if np.array_equal(q0, qe):
+        raise ConfigurationError(
+            "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
+        )
     options = dict(grid=grid, velocity_limits=velocity_limits)
-    initial = optimal_timing(robot, StraightPath(q0, qe), cost, **options)
-    history = [Iteration(0, initial.objective, None, initial.duration, initial.wall_time)]
+    line = StraightPath(q0, qe)
+    initial = optimal_timing(robot, line, cost, **options)
+    history = [
+        Iteration(0, initial.objective, None, initial.duration, initial.wall_time, line)
+    ]
 
     def accept(entry: Iteration) -> None:
         history.append(entry)
@@ -203,9 +213,7 @@ def plan(
 
     if verbose:
         print(_format(history[0]), flush=True)
-    if np.array_equal(q0, qe):
-        path, status, message, evaluations = StraightPath(q0, qe), "converged", "q0 == qe", 1
-    elif method == "quasi-newton":
+    if method == "quasi-newton":
         path, status, message, evaluations = _quasi_newton(
             robot, q0, qe, cost, control_points, options, position_limits, max_iterations,
             time_limit, tolerance, t_start, accept,
@@ -315,6 +323,7 @@ def _quasi_newton(
                 alpha=float(np.max(np.abs(x - state["x"]))),
                 duration=float(last["duration"]),
                 wall_time=time.perf_counter() - t_start,
+                path=BSplinePath(controls(x)),
             )
         )
         state["x"] = x.copy()

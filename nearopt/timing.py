@@ -613,12 +613,13 @@ def solve_timing(
     """
     _check_gravity(problem)
     disc = _Discretisation(problem)
+    weights = cost.torque_weights(problem.dof) if isinstance(cost, TorqueCost) else None
+    if weights is not None and np.any(weights) and not disc.has_damping:
+        return _solve_convex(disc, cost, weights, None, tolerance)  # no linearisation point needed
     z_max, rounds = _greatest_profile(disc)
     z_max = _into_limits(disc, z_max)
     if np.any(z_max <= 0):
         raise SolverError("stage 1 found no positive speed profile although gravity is feasible")
-
-    weights = cost.torque_weights(problem.dof) if isinstance(cost, TorqueCost) else None
     if weights is not None and not np.any(weights):
         # f0 = 1: certify the greatest profile by the KKT conditions of min Σ Δt (an LP in the
         # descent direction: no feasible z decreases the linearised time).
@@ -643,10 +644,13 @@ def _solve_convex(
     disc: _Discretisation,
     cost: Cost,
     weights: NDArray[np.float64],
-    z_max: NDArray[np.float64],
+    z_max: NDArray[np.float64] | None,
     tolerance: float,
 ) -> TimingSolution:
-    """f0 = 1 + Σ w u²: the SOCP, repeated with the damping re-linearised until a fixed point."""
+    """f0 = 1 + Σ w u²: the SOCP, repeated with the damping re-linearised until a fixed point.
+
+    ``z_max`` (the greatest profile) is the first linearisation point; None without damping.
+    """
     solutions = []
 
     def socp(z_lin: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -764,10 +768,68 @@ class _Between:
         )
         self.where = np.concatenate([np.tile(frac, big_n), near, 1.0 - near])
         s = (problem.s[self.seg] + self.where * self.ds[self.seg]) * path.s_end
-        self.coef = robot.path_coefficients(
-            path(s, 0), path(s, 1) * path.s_end, path(s, 2) * path.s_end**2
-        )
+        self.points = points
+        self.dtheta = path(s, 1) * path.s_end
+        self.ddtheta = path(s, 2) * path.s_end**2
+        self.coef = robot.path_coefficients(path(s, 0), self.dtheta, self.ddtheta)
         self.problem = problem
+
+    def _speed_terms(
+        self, b: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Bounds on b and on |θ'| over each interval between neighbouring points.
+
+        Between two neighbouring points a, c of a segment (knots and interior points, h apart)
+        |θ'| ≤ max(|θ'(a)|, |θ'(c)|) + h² max|θ‴| / 8, with θ‴ taken as (θ''(c) − θ''(a)) / h
+        (exact on a cubic piece), and b ≤ max(b(a), b(c)) since b is linear.
+
+        Returns
+        -------
+        (b_pair, slope)
+            Shapes (N, points + 1, 1) and (N, points + 1, n).
+        """
+        p, points = self.problem, self.points
+        big_n = p.segments
+        inner = slice(0, big_n * points)
+        d1, d2 = (
+            np.concatenate(
+                [ends[:-1, None], mid[inner].reshape(big_n, points, -1), ends[1:, None]], axis=1
+            )
+            for ends, mid in ((p.dtheta, self.dtheta), (p.ddtheta, self.ddtheta))
+        )
+        h = (self.ds / (points + 1))[:, None, None]
+        slope = np.maximum(np.abs(d1[:, :-1]), np.abs(d1[:, 1:]))
+        slope = slope + h * np.abs(np.diff(d2, axis=1)) / 8.0
+        frac = np.arange(points + 2) / (points + 1)
+        b_pts = b[:-1, None] + frac[None, :] * (b[1:] - b[:-1])[:, None]
+        return np.maximum(b_pts[:, :-1], b_pts[:, 1:])[:, :, None], slope
+
+    def speed_excess(
+        self, b: NDArray[np.float64], velocity: NDArray[np.float64]
+    ) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
+        """Segments where |θ̇_i| = |θ'_i| √b may exceed v_i, and bounds on b that prevent it.
+
+        A segment violates if b |θ'|² (see :meth:`_speed_terms`) exceeds v² on any of its
+        intervals; bounding b at both its knots by v_i² / max|θ'_i|² over the whole segment (the
+        returned bound) rules that out.
+
+        Returns
+        -------
+        (violates, bound)
+            Shapes (N,) and (N,).
+        """
+        b_pair, slope = self._speed_terms(b)
+        violates = np.any(b_pair * slope**2 > velocity**2 * (1.0 + 1e-12), axis=(1, 2))
+        with np.errstate(divide="ignore"):
+            bound = np.min(velocity**2 / np.max(slope, axis=1) ** 2, axis=1)
+        return violates, bound
+
+    def speed_scale(self, b: NDArray[np.float64], velocity: NDArray[np.float64]) -> float:
+        """The largest α ≤ 1 such that αb keeps every joint speed within its limit."""
+        b_pair, slope = self._speed_terms(b)
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = velocity**2 / (b_pair * slope**2)
+        return float(min(1.0, np.nanmin(ratio)))
 
     def excess(self, b: NDArray[np.float64], alpha: float = 1.0) -> NDArray[np.float64]:
         """max(u − u_max, u_min − u) at every point for the profile αb, shape (M, n)."""
@@ -793,15 +855,24 @@ class _Between:
 
 
 def _tighten(
-    problem: TimingProblem, between: _Between, b: NDArray[np.float64]
+    problem: TimingProblem,
+    between: _Between,
+    b: NDArray[np.float64],
+    velocity: NDArray[np.float64] | None,
 ) -> TimingProblem | None:
-    """The problem with larger margins at the samples of segments that bulge out; None if none do.
+    """The problem tightened where the motion leaves a limit between samples; None if it does not.
 
     A segment whose torque exceeds a limit by e between its samples gets margin 1.5 e more at
-    both its samples (capped so gravity stays strictly inside the tightened limits).
+    both its samples (capped so gravity stays strictly inside the tightened limits); a segment
+    whose joint speed may exceed a limit gets the speed bound of its whole length at its knots.
     """
     worst = between.per_segment(b)
-    if not np.any(worst > 0):
+    slow, bound = (
+        (np.zeros(problem.segments, bool), None)
+        if velocity is None
+        else between.speed_excess(b, velocity)
+    )
+    if not np.any(worst > 0) and not np.any(slow):
         return None
     big_n = problem.segments
     old = np.zeros((2 * big_n, problem.dof)) if problem.margin is None else problem.margin
@@ -810,7 +881,12 @@ def _tighten(
     node = np.concatenate([np.arange(big_n), np.arange(1, big_n + 1)])
     g = problem.coef.g[node]
     room = np.minimum(problem.u_upper - g, g - problem.u_lower)
-    return replace(problem, margin=np.minimum(margin, 0.9 * room))
+    b_upper = problem.b_upper.copy()
+    if np.any(slow):
+        seg = np.flatnonzero(slow)
+        b_upper[seg] = np.minimum(b_upper[seg], bound[seg])
+        b_upper[seg + 1] = np.minimum(b_upper[seg + 1], bound[seg])
+    return replace(problem, margin=np.minimum(margin, 0.9 * room), b_upper=b_upper)
 
 
 def optimal_timing(
@@ -852,19 +928,20 @@ def optimal_timing(
     t0 = time.perf_counter()
     cost = TimeCost() if cost is None else cost
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
-    sol = solve_timing(problem, cost, tolerance=tolerance)
     between = _Between(robot, path, problem)
-    for _ in range(4):  # tighten the samples of segments that bulge out, then re-solve
-        tighter = _tighten(problem, between, sol.b)
+    velocity = robot.limits.velocity if velocity_limits else None
+    sol = solve_timing(problem, cost, tolerance=tolerance)
+    for _ in range(4):  # tighten where the motion leaves a limit between samples, re-solve
+        tighter = _tighten(problem, between, sol.b, velocity)
         if tighter is None:
             break
         problem = tighter
         sol = solve_timing(problem, cost, tolerance=tolerance)
     b = between.scale_into_limits(sol.b)  # what is left (if anything): a uniform slow-down
+    if velocity is not None:
+        b = b * between.speed_scale(b, velocity)
     # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
-    traj = Trajectory(
-        path, problem.s * path.s_end, b * path.s_end**2, robot.inverse_dynamics_batch
-    )
+    traj = Trajectory(path, problem.s * path.s_end, b * path.s_end**2, robot.inverse_dynamics_batch)
     return TimingResult(
         trajectory=traj,
         J=traj.integrate(cost),
@@ -876,7 +953,6 @@ def optimal_timing(
         message=sol.message,
         wall_time=time.perf_counter() - t0,
     )
-
 
 
 def _grid(segments: int) -> NDArray[np.float64]:

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from checks import simulate, torques_from_samples, worst_torque_excess
+from checks import assert_independent_checks
 from conftest import ROBOT_NAMES, load, random_configuration
 
 import nearopt
@@ -126,29 +126,14 @@ def test_cost_does_not_depend_on_the_scale_of_s() -> None:
 def test_returned_trajectory_passes_independent_checks(
     robot: nearopt.Robot, cost: TorqueCost
 ) -> None:
-    path = random_line(robot, seed=7) if robot.name != "two_link" else StraightPath(THETA_0, THETA_E)
+    if robot.name == "two_link":
+        path = StraightPath(THETA_0, THETA_E)
+    else:
+        path = random_line(robot, seed=7)
     result = optimal_timing(robot, path, cost, grid=200)
-    traj = result.trajectory
-    samples = traj.sample(2000.0)
-    # torques from Pinocchio's RNEA (+ D θ̇) on the samples stay within the limits
-    u = torques_from_samples(robot, samples)
-    assert worst_torque_excess(robot, u) <= 1e-6
-    # joint speeds within the URDF limits (stage 1 enforces them by default)
-    assert np.all(np.abs(samples["qd"]) <= robot.limits.velocity * (1 + 1e-9))
-    # rest at both ends, at the right places
-    np.testing.assert_allclose(samples["q"][0], path(0.0)[0], atol=1e-12)
-    np.testing.assert_allclose(samples["q"][-1], path(path.s_end)[0], atol=1e-12)
-    np.testing.assert_allclose(samples["qd"][[0, -1]], 0.0, atol=1e-12)
-    # J recomputed from the samples (trapezoid at 2 kHz) equals the reported J
-    j_samples = np.trapezoid(cost(samples["q"], samples["qd"], u), samples["t"])
-    np.testing.assert_allclose(j_samples, result.J, rtol=2e-4)
-    np.testing.assert_allclose(samples["t"][-1], result.duration, rtol=1e-12)
-    # forward simulation of u(t) with ABA reaches θe at rest (windows of 0.25 s, see checks.py:
-    # integration error ~1e-10 amplified by the arm's open-loop instability within a window)
-    x_end, defect = simulate(robot, traj)
-    np.testing.assert_allclose(x_end[: robot.n], path(path.s_end)[0], atol=1e-5)
-    np.testing.assert_allclose(x_end[robot.n :], 0.0, atol=1e-4)
-    assert defect < 1e-5
+    assert_independent_checks(
+        robot, result.trajectory, cost, result.J, path(0.0)[0], path(path.s_end)[0]
+    )
 
 
 def test_general_cost_callable_matches_builtin_optimum() -> None:

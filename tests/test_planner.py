@@ -1,0 +1,201 @@
+"""Stage 2 and the planner: gradients against finite differences, the paper's example, any arm."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from checks import assert_independent_checks
+from conftest import load, random_configuration
+
+import nearopt
+from nearopt.gradient import nominal_motion, torque_gradient
+from nearopt.sensitivity import timing_sensitivity
+from nearopt.timing import build_timing_problem, solve_timing
+
+THETA_0 = np.deg2rad([45.0, -90.0])
+THETA_E = np.deg2rad([-90.0, 0.0])
+PAPER_COST = nearopt.TorqueCost(0.03)
+PAPER_J6 = 0.57766  # Table 2, after six iterations
+BEST_KNOWN = 0.5515  # direct multiple shooting with IPOPT (the issue; scripts/bench_planner.py)
+
+
+def end_points(robot: nearopt.Robot, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    if robot.name == "two_link":
+        return THETA_0, THETA_E
+    rng = np.random.default_rng(seed)
+    return random_configuration(robot, rng), random_configuration(robot, rng)
+
+
+# ------------------------------------------------------------------ gradients
+@pytest.mark.parametrize("name", ["two_link", "ur5", "panda"])
+@pytest.mark.parametrize("cost", [nearopt.TimeCost(), PAPER_COST], ids=["time", "torque2"])
+def test_stage1_sensitivity_matches_finite_differences(name: str, cost: nearopt.Cost) -> None:
+    """dJ*/dc of stage 1's optimum (envelope theorem) against central differences of re-solves."""
+    robot = load(name)
+    rng = np.random.default_rng(5)
+    q0, qe = end_points(robot, seed=5)
+    controls = np.array(nearopt.BSplinePath.line(q0, qe, 5).control_points)
+    controls[1:-1] += rng.normal(scale=0.1, size=controls[1:-1].shape)
+
+    def solve(c: np.ndarray) -> tuple[float, np.ndarray]:
+        path = nearopt.BSplinePath(c)
+        problem = build_timing_problem(robot, path, grid=80)
+        sol = solve_timing(problem, cost)
+        sens = timing_sensitivity(robot, problem, sol.b, cost)
+        grad = sum(path.basis(problem.s, k).T @ d for k, d in enumerate(
+            (sens.theta, sens.dtheta, sens.ddtheta)))
+        return sol.objective, grad
+
+    _, grad = solve(controls)
+    # h = 1e-4: the re-solves carry noise ~1e-9 J (solver tolerance), i.e. ~1e-5 J / h in the
+    # difference at h = 1e-4, while the central difference's truncation error is O(h²)
+    h = 1e-4
+    scale = np.max(np.abs(grad))
+    for j, i in [(1, 0), (3, robot.n - 1), (5, robot.n // 2)]:
+        step = np.zeros_like(controls)
+        step[j, i] = h
+        fd = (solve(controls + step)[0] - solve(controls - step)[0]) / (2 * h)
+        assert abs(grad[j, i] - fd) <= 1e-5 * scale, (j, i, grad[j, i], fd)
+
+
+@pytest.mark.parametrize("name", ["two_link", "ur5"])
+def test_torque_gradient_matches_finite_differences(name: str) -> None:
+    """η(t) of eq. (23) against J(u + εφ) by forward simulation (ABA) of the perturbed torques."""
+    robot = load(name)
+    q0, qe = end_points(robot, seed=2)
+    timing = nearopt.optimal_timing(robot, nearopt.StraightPath(q0, qe), PAPER_COST, grid=60)
+    t, _, u = nominal_motion(robot, timing.trajectory, 0.9 * timing.duration)
+    n = robot.n
+    target = np.concatenate([qe, np.zeros(n)]) + 0.05  # so that F and p(T) are not zero
+    gamma = 0.1
+
+    def rollout(torques: np.ndarray) -> tuple[np.ndarray, float]:
+        """x(t) on the grid t and J = F(x(T)) + ∫ f0 under u interpolated linearly.
+
+        Classical RK4 with 8 steps per grid interval: deterministic (an adaptive integrator's
+        step choices differ between the ± runs and put noise into the difference) and smooth in
+        u, with an error far below the differences measured here.
+        """
+
+        def rhs(y: np.ndarray, uk: np.ndarray) -> np.ndarray:
+            qdd = robot.forward_dynamics(y[:n], y[n : 2 * n], uk)
+            f0 = PAPER_COST(y[None, :n], y[None, n : 2 * n], uk[None])[0]
+            return np.concatenate([y[n : 2 * n], qdd, [f0]])
+
+        y = np.concatenate([q0, np.zeros(n), [0.0]])
+        states = [y[: 2 * n]]
+        sub = 8
+        for k in range(t.size - 1):
+            h = (t[k + 1] - t[k]) / sub
+            for m in range(sub):
+                w0, w1 = m / sub, (m + 1) / sub
+                ua = (1 - w0) * torques[k] + w0 * torques[k + 1]
+                ub = (1 - w1) * torques[k] + w1 * torques[k + 1]
+                um = 0.5 * (ua + ub)
+                k1 = rhs(y, ua)
+                k2 = rhs(y + 0.5 * h * k1, um)
+                k3 = rhs(y + 0.5 * h * k2, um)
+                k4 = rhs(y + h * k3, ub)
+                y = y + h / 6 * (k1 + 2 * k2 + 2 * k3 + k4)
+            states.append(y[: 2 * n])
+        x = np.array(states)
+        return x, gamma * np.sum((x[-1] - target) ** 2) + y[-1]
+
+    x, _ = rollout(u)
+    eta = torque_gradient(robot, t, x, u, PAPER_COST, target, gamma)
+    for i in sorted({0, n - 1}):
+        phi = np.zeros_like(u)
+        phi[:, i] = np.sin(np.pi * t / t[-1]) * (1 + t / t[-1])
+        eps = 1e-4
+        fd = (rollout(u + eps * phi)[1] - rollout(u - eps * phi)[1]) / (2 * eps)
+        predicted = np.trapezoid(np.sum(eta * phi, axis=1), t)
+        # A(t) and f0's gradient are interpolated linearly between 401 samples: O(Δt²) error
+        assert predicted == pytest.approx(fd, rel=2e-3, abs=1e-6), (i, predicted, fd)
+
+
+# ------------------------------------------------------------------ the paper's example
+@pytest.fixture(scope="module")
+def paper_plan() -> nearopt.PlanResult:
+    return nearopt.plan(load("two_link"), THETA_0, THETA_E, PAPER_COST, grid=200)
+
+
+def test_paper_example_beats_the_paper_and_reaches_the_best_known(
+    paper_plan: nearopt.PlanResult,
+) -> None:
+    result = paper_plan
+    assert result.J < PAPER_J6
+    assert result.J <= BEST_KNOWN * 1.002, result.J
+    assert result.duration == pytest.approx(0.342, abs=2e-3)
+    assert result.status == "converged"
+    assert result.J < result.initial.J
+
+
+def test_paper_example_plan_passes_independent_checks(paper_plan: nearopt.PlanResult) -> None:
+    robot = load("two_link")
+    assert_independent_checks(
+        robot, paper_plan.trajectory, PAPER_COST, paper_plan.J, THETA_0, THETA_E
+    )
+
+
+def test_every_iterate_meets_the_end_conditions_and_lowers_j(
+    paper_plan: nearopt.PlanResult,
+) -> None:
+    history = paper_plan.history
+    assert history[0].J == pytest.approx(paper_plan.initial.objective)
+    assert all(b.J < a.J for a, b in zip(history[:-1], history[1:], strict=True))
+    for it in history:
+        ends = it.path(np.array([0.0, it.path.s_end]), 0)
+        np.testing.assert_allclose(ends, [THETA_0, THETA_E], atol=1e-8, rtol=0)
+
+
+def test_paper_update_lowers_j_and_keeps_the_ends() -> None:
+    """Section 6's own update (η, clipped u*, boundary-value problem) from the straight line."""
+    robot = load("two_link")
+    seen: list[nearopt.Iteration] = []
+    result = nearopt.plan(
+        robot, THETA_0, THETA_E, PAPER_COST, method="paper", grid=100, max_iterations=3,
+        callback=seen.append,
+    )
+    assert len(result.history) == 4 and seen == list(result.history[1:])
+    assert all(b.J < a.J for a, b in zip(result.history[:-1], result.history[1:], strict=True))
+    assert result.J < result.initial.J * 0.99
+    for it in result.history:
+        ends = it.path(np.array([0.0, it.path.s_end]), 0)
+        np.testing.assert_allclose(ends, [THETA_0, THETA_E], atol=1e-8, rtol=0)
+    assert_independent_checks(robot, result.trajectory, PAPER_COST, result.J, THETA_0, THETA_E)
+
+
+# ------------------------------------------------------------------ URDF arms
+@pytest.mark.parametrize("name", ["two_link", "ur5", "panda"])
+def test_plan_on_urdf_arms(name: str) -> None:
+    """A short plan on each arm: better than the straight line, verified, within every limit."""
+    robot = load(name)
+    q0, qe = end_points(robot, seed=9)
+    result = nearopt.plan(robot, q0, qe, PAPER_COST, grid=60, control_points=6, max_iterations=15)
+    assert result.J < result.initial.J
+    assert_independent_checks(robot, result.trajectory, PAPER_COST, result.J, q0, qe)
+
+
+def test_position_limits_bind_when_the_free_optimum_leaves_them() -> None:
+    """Narrow limits around the straight line: the plan stays inside, the unlimited one does not."""
+    robot = load("two_link")
+    lo = np.minimum(THETA_0, THETA_E) - 0.05
+    hi = np.maximum(THETA_0, THETA_E) + 0.05
+    narrow = robot.with_limits(position=(lo, hi))
+    free = nearopt.plan(robot, THETA_0, THETA_E, PAPER_COST, grid=60, max_iterations=40)
+    q_free = free.trajectory.sample(500.0)["q"]
+    assert np.any(q_free < lo) or np.any(q_free > hi)
+    bound = nearopt.plan(narrow, THETA_0, THETA_E, PAPER_COST, grid=60, max_iterations=40)
+    assert bound.J < bound.initial.J
+    assert_independent_checks(narrow, bound.trajectory, PAPER_COST, bound.J, THETA_0, THETA_E)
+
+
+def test_plan_rejects_bad_requests() -> None:
+    robot = load("two_link")
+    with pytest.raises(nearopt.ConfigurationError, match="method"):
+        nearopt.plan(robot, THETA_0, THETA_E, method="newton")
+    with pytest.raises(nearopt.ConfigurationError, match="zero-length"):
+        nearopt.plan(robot, THETA_0, THETA_0)
+    narrow = robot.with_limits(position=([-1.0, -1.0], [1.0, 1.0]))
+    with pytest.raises(nearopt.ConfigurationError, match="joint2"):
+        nearopt.plan(narrow, [0.0, 0.0], [0.5, -1.5])
