@@ -338,7 +338,7 @@ def _quasi_newton(
         method="L-BFGS-B",
         bounds=bounds,
         callback=on_iteration,
-        options={"maxiter": max_iterations, "ftol": tolerance, "gtol": 1e-10, "maxcor": 20},
+        options={"maxiter": max_iterations, "ftol": tolerance, "gtol": 1e-10, "maxcor": 50},
     )
     if state["stop"]:
         status, message = state["stop"], f"time limit of {time_limit} s reached"

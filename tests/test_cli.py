@@ -1,0 +1,90 @@
+"""The ``nearopt`` command line: JSON output checked against the robot, one-line errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from checks import torques_from_samples, worst_torque_excess
+from conftest import load
+
+PAPER = ["--robot", "two_link", "--q0", "45", "-90", "--qe", "-90", "0", "--deg"]
+
+
+def run(*args: str) -> subprocess.CompletedProcess[str]:
+    """The console script as a user runs it (the module's entry point, in a subprocess)."""
+    return subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", *args], capture_output=True, text=True, timeout=600
+    )
+
+
+@pytest.mark.parametrize("mode", [[], ["--stage1-only"]], ids=["plan", "stage1-only"])
+def test_plan_writes_the_documented_json(tmp_path: Path, mode: list[str]) -> None:
+    target = tmp_path / "plan.json"
+    done = run("plan", *PAPER, "--beta", "0.03", "--grid", "100", "--max-iterations", "20",
+               "--quiet", "--json", str(target), "--rate", "500", *mode)
+    assert done.returncode == 0, done.stderr
+    doc = json.loads(target.read_text())
+    assert set(doc) == {"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
+                        "tau", "history"}
+    assert doc["robot"] == "two_link" and doc["joint_names"] == ["joint1", "joint2"]
+    t = np.array(doc["t"])
+    # 500 Hz from 0 to te inclusive
+    assert t[0] == 0.0 and t[-1] == pytest.approx(doc["duration"], abs=1e-12)
+    np.testing.assert_allclose(np.diff(t[:-1]), 1 / 500, rtol=1e-9)
+    assert t[-1] - t[-2] <= 1 / 500 + 1e-12
+    q, qd, qdd, tau = (np.array(doc[k]) for k in ("q", "qd", "qdd", "tau"))
+    assert q.shape == qd.shape == qdd.shape == tau.shape == (t.size, 2)
+    np.testing.assert_allclose(q[0], np.deg2rad([45, -90]), atol=1e-12)
+    np.testing.assert_allclose(q[-1], np.deg2rad([-90, 0]), atol=1e-8)
+    # the torques in the file are those of the motion in the file, and within the limits
+    robot = load("two_link")
+    u = torques_from_samples(robot, {"q": q, "qd": qd, "qdd": qdd})
+    np.testing.assert_allclose(tau, u, atol=1e-9)
+    assert worst_torque_excess(robot, tau) <= 1e-6
+    history = doc["history"]
+    assert history[0]["alpha"] is None and history[-1]["J"] <= history[0]["J"]
+    assert (len(history) == 1) == bool(mode)
+
+
+@pytest.mark.parametrize(
+    ("args", "expected"),
+    [
+        (["--robot", "nope", "--q0", "0", "--qe", "1"], "known robots: two_link"),
+        (["--robot", "two_link", "--q0", "0", "--qe", "1", "1"], "q0 must have 2 values"),
+        (["--robot", "two_link", "--q0", "0", "0", "--qe", "nan", "1"], "is nan"),
+        (["--robot", "two_link", "--q0", "0", "0", "--qe", "0", "0"], "zero-length"),
+        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--beta", "-1"], "beta"),
+        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--rate", "0"], "--rate"),
+        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--json",
+          "/nonexistent/x.json"], "does not exist"),
+        (["--urdf", "/nonexistent.urdf", "--q0", "0", "--qe", "1"], "not found"),
+        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--beta", "1",
+          "--time-optimal"], "not allowed with"),
+        (["--q0", "0", "--qe", "1"], "one of the arguments --robot --urdf is required"),
+    ],
+)
+def test_bad_arguments_give_one_line_and_exit_code_2(args: list[str], expected: str) -> None:
+    done = run("plan", *args)
+    assert done.returncode == 2
+    lines = done.stderr.strip().splitlines()
+    assert len(lines) == 1 and lines[0].startswith("nearopt: error: "), done.stderr
+    assert expected in lines[0]
+    assert done.stdout == ""
+
+
+def test_robots_lists_the_known_arms() -> None:
+    done = run("robots")
+    assert done.returncode == 0
+    assert done.stdout.split() == ["two_link", "kinova", "panda", "ur5", "xarm7", "z1"]
+
+
+def test_console_script_is_installed() -> None:
+    from importlib.metadata import entry_points
+
+    (script,) = entry_points(group="console_scripts", name="nearopt")
+    assert script.value == "nearopt.cli:main"
