@@ -24,10 +24,12 @@ u is affine in b and u²/(√b_k + √b_{k+1}) is convex, so its global optimum 
 
 1. Feasibility is decided exactly: some timing exists iff gravity alone is within the limits at
    every knot (b → 0 gives u → g); otherwise :class:`InfeasiblePathError` says where.
-2. HiGHS (``scipy.optimize.linprog``) maximises Σ b_k: the greatest feasible speed profile, which
-   is the time-optimal timing when the feasible set is a lattice (as for pairwise constraints).
-   For f0 = 1 a second LP checks the KKT conditions at that profile (a certificate of optimality).
-3. For w ≠ 0 the problem is a second-order cone program (see :func:`_socp`), solved by Clarabel.
+2. Without damping, the problem is a second-order cone program (see :func:`_socp`; f0 = 1
+   included), solved by Clarabel.
+3. With damping, HiGHS (``scipy.optimize.linprog``) first maximises Σ b_k: the greatest feasible
+   speed profile, which is the time-optimal timing when the feasible set is a lattice (as for
+   pairwise constraints); for f0 = 1 a second LP checks the KKT conditions at that profile (a
+   certificate of optimality), and otherwise the SOCP starts from it.
 4. Any other f0 (:class:`~nearopt.CallableCost`) goes to SciPy's ``trust-constr`` interior-point
    method from the greatest profile, with the exact gradient and the (tridiagonal) Hessian from
    differences of that gradient: a local optimum.
@@ -35,8 +37,12 @@ u is affine in b and u²/(√b_k + √b_{k+1}) is convex, so its global optimum 
 Damping makes u depend on λ = √b. It is handled, not dropped: the LPs and the SOCP linearise √b at
 the previous profile until a fixed point (where the linearisation is exact), and ``trust-constr``
 takes the torque limits as nonlinear constraints. The problem is then not convex in general (local
-optimum). The answer is finally scaled into the limits (b → αb, α ≤ 1) if the solver's tolerance
-left any torque sample outside them, at the knots or inside the segments.
+optimum).
+
+:func:`optimal_timing` then checks the torques and joint speeds between the samples (inside the
+segments and next to the rest ends); where they leave a limit, it either slows the whole motion
+down uniformly (b → αb) when that costs less than 1e-5 of b, or tightens the offending segments
+and solves again.
 """
 
 from __future__ import annotations
@@ -614,7 +620,7 @@ def solve_timing(
     _check_gravity(problem)
     disc = _Discretisation(problem)
     weights = cost.torque_weights(problem.dof) if isinstance(cost, TorqueCost) else None
-    if weights is not None and np.any(weights) and not disc.has_damping:
+    if weights is not None and not disc.has_damping:
         return _solve_convex(disc, cost, weights, None, tolerance)  # no linearisation point needed
     z_max, rounds = _greatest_profile(disc)
     z_max = _into_limits(disc, z_max)
@@ -854,6 +860,14 @@ class _Between:
         return _largest_scale(lambda alpha: float(np.max(self.excess(b, alpha)))) * b
 
 
+def _uniform_slow_down(
+    between: _Between, b: NDArray[np.float64], velocity: NDArray[np.float64] | None
+) -> NDArray[np.float64]:
+    """αb with the largest α ≤ 1 that keeps torques (and speeds) within the limits everywhere."""
+    b = between.scale_into_limits(b)
+    return b if velocity is None else b * between.speed_scale(b, velocity)
+
+
 def _tighten(
     problem: TimingProblem,
     between: _Between,
@@ -931,15 +945,19 @@ def optimal_timing(
     between = _Between(robot, path, problem)
     velocity = robot.limits.velocity if velocity_limits else None
     sol = solve_timing(problem, cost, tolerance=tolerance)
-    for _ in range(4):  # tighten where the motion leaves a limit between samples, re-solve
+    for _ in range(4):
+        # where the motion leaves a limit between samples: a uniform slow-down by α if that
+        # costs less than 1e-5 of b (below the grid's own error), otherwise tighten and re-solve
+        b = _uniform_slow_down(between, sol.b, velocity)
+        if np.all(b >= (1.0 - 1e-5) * sol.b):
+            break
         tighter = _tighten(problem, between, sol.b, velocity)
         if tighter is None:
             break
         problem = tighter
         sol = solve_timing(problem, cost, tolerance=tolerance)
-    b = between.scale_into_limits(sol.b)  # what is left (if anything): a uniform slow-down
-    if velocity is not None:
-        b = b * between.speed_scale(b, velocity)
+    else:
+        b = _uniform_slow_down(between, sol.b, velocity)
     # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
     traj = Trajectory(path, problem.s * path.s_end, b * path.s_end**2, robot.inverse_dynamics_batch)
     return TimingResult(

@@ -17,6 +17,7 @@ import pinocchio as pin
 import toppra as ta
 
 import nearopt
+import nearopt.timing
 
 
 def line(robot: nearopt.Robot) -> nearopt.StraightPath:
@@ -41,7 +42,9 @@ def toppra_duration(robot: nearopt.Robot, path: nearopt.StraightPath, grid: int)
             discretization_scheme=ta.constraint.DiscretizationType.Interpolation,
         ),
     ]
-    algo = ta.algorithm.TOPPRA(constraints, spline, gridpoints=np.linspace(0, 1, grid + 1))
+    # the same knots as nearopt's stage 1 (clustered at the rest ends)
+    knots = nearopt.timing.build_timing_problem(robot, path, grid=grid).s
+    algo = ta.algorithm.TOPPRA(constraints, spline, gridpoints=knots)
     return algo.compute_trajectory(0, 0).duration
 
 
