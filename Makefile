@@ -2,10 +2,11 @@
 # up and runs the whole test suite. Both work from a clean clone on a machine with Python 3.11,
 # make and apt (as root); everything else is installed here, into .venv/.
 
-PYTHON ?= python3
-VENV   := .venv
-BIN    := $(VENV)/bin
-STAMP  := $(VENV)/.installed
+PYTHON   ?= python3
+VENV     := .venv
+BIN      := $(VENV)/bin
+STAMP    := $(VENV)/.installed
+CHROMIUM := /usr/bin/chromium
 
 .PHONY: setup run test bench clean
 
@@ -28,7 +29,11 @@ $(STAMP): pyproject.toml | $(BIN)/python
 run: setup
 	$(BIN)/python scripts/01_paper_example.py
 
-test: setup
+# The browser test drives Debian's chromium (no browser download: there may be no internet).
+$(CHROMIUM):
+	apt-get update -qq && apt-get install -y -qq chromium >/dev/null
+
+test: setup $(CHROMIUM)
 	$(BIN)/python -m pytest
 
 bench: setup

@@ -1,6 +1,7 @@
-"""The ``nearopt`` command line: plan a motion for a named or URDF arm and write it as JSON.
+"""The ``nearopt`` command line: plan a motion for a named or URDF arm; write, plot or play it.
 
-    nearopt plan --robot two_link --q0 45 -90 --qe -90 0 --deg --beta 0.03 --json plan.json
+    nearopt plan --robot two_link --q0 45 -90 --qe -90 0 --deg --beta 0.03 --json plan.json \
+        --csv plan.csv --plots figures/ --html plan.html [--show]
     nearopt robots
 
 Every failure the user can cause (a bad argument, a bad URDF, an infeasible request) ends with one
@@ -10,10 +11,8 @@ line on stderr, ``nearopt: error: …``, and exit code 2; no output file is writ
 from __future__ import annotations
 
 import argparse
-import json
-import os
 import sys
-import tempfile
+import time
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -22,10 +21,9 @@ import numpy as np
 from .catalog import available_robots
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, NearoptError
-from .path import StraightPath
+from .export import check_writable, write_csv, write_json
 from .planner import METHODS, plan
 from .robot import Robot
-from .timing import optimal_timing
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -73,7 +71,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--no-position-limits", action="store_true",
                    help="ignore joint position limits")
     p.add_argument("--json", metavar="FILE", help="write the planned motion as JSON")
-    p.add_argument("--rate", type=float, default=1000.0, help="JSON sampling rate [Hz] (1000)")
+    p.add_argument("--csv", metavar="FILE", help="write the same samples as CSV")
+    p.add_argument("--rate", type=float, default=1000.0, help="JSON/CSV sampling rate [Hz] (1000)")
+    p.add_argument("--plots", metavar="DIR", help="write torques.png, workspace.png, history.png")
+    p.add_argument("--html", metavar="FILE", help="write the animation as a standalone HTML file")
+    p.add_argument("--show", action="store_true",
+                   help="play it in the browser (meshcat server on 127.0.0.1) until Ctrl+C")
     p.add_argument("--quiet", action="store_true", help="no per-iteration output")
     return parser
 
@@ -86,81 +89,65 @@ def _cost(args: argparse.Namespace) -> Cost:
     return TimeCost()
 
 
-def _check_writable(target: str) -> Path:
-    path = Path(target).expanduser()
-    folder = path.parent if str(path.parent) else Path(".")
-    if path.is_dir():
-        raise ConfigurationError(f"cannot write {target}: it is a directory")
-    if not folder.is_dir():
-        raise ConfigurationError(f"cannot write {target}: folder {folder} does not exist")
-    if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise ConfigurationError(f"cannot write {target}: permission denied")
-    return path
-
-
-def _write_atomically(path: Path, text: str) -> None:
-    """Write via a temporary file in the same folder, so a failure leaves no partial file."""
-    fd, tmp = tempfile.mkstemp(dir=path.parent if str(path.parent) else ".", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "w") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+def _check_folder(target: str) -> Path:
+    folder = Path(target).expanduser()
+    if folder.exists() and not folder.is_dir():
+        raise ConfigurationError(f"cannot write figures into {target}: it is not a folder")
+    if not folder.exists():
+        check_writable(folder)  # its parent must exist and be writable
+    return folder
 
 
 def _plan_command(args: argparse.Namespace) -> None:
     if not (np.isfinite(args.rate) and args.rate > 0):
         raise ConfigurationError(f"--rate must be a positive number of Hz, got {args.rate}")
-    target = _check_writable(args.json) if args.json else None
+    # every output is checked before planning, so that a bad path costs no planning time
+    outputs = {key: check_writable(getattr(args, key)) for key in ("json", "csv", "html")
+               if getattr(args, key)}
+    plots = _check_folder(args.plots) if args.plots else None
     robot = (
         Robot.from_name(args.robot)
         if args.robot
         else Robot.from_urdf(args.urdf, locked_joints=tuple(args.lock))
     )
     q0, qe = (np.deg2rad(v) if args.deg else np.asarray(v) for v in (args.q0, args.qe))
-    cost = _cost(args)
-    velocity = not args.no_velocity_limits
-    if args.stage1_only:
-        q0 = robot.check_configuration(q0, "q0")
-        qe = robot.check_configuration(qe, "qe")
-        timing = optimal_timing(
-            robot, StraightPath(q0, qe), cost, grid=args.grid, velocity_limits=velocity
-        )
-        trajectory, J, duration = timing.trajectory, timing.J, timing.duration
-        history = [{"J": timing.objective, "alpha": None}]
-        print(f"stage 1 on the straight line: J = {J:.6f}, te = {duration:.4f} s "
-              f"({timing.solver}, {timing.wall_time:.2f} s)")
-    else:
-        result = plan(
-            robot, q0, qe, cost,
-            method=args.method,
-            grid=args.grid,
-            max_iterations=args.max_iterations,
-            time_limit=args.time_limit,
-            velocity_limits=velocity,
-            position_limits=not args.no_position_limits,
-            verbose=not args.quiet,
-        )
-        trajectory, J, duration = result.trajectory, result.J, result.duration
-        history = [{"J": it.J, "alpha": it.alpha} for it in result.history]
-        print(f"{result.status}: J = {J:.6f} (straight line {result.initial.J:.6f}), "
-              f"te = {duration:.4f} s, {len(result.history) - 1} iterations, "
-              f"{result.wall_time:.2f} s ({result.message})")
-    if target is not None:
-        samples = trajectory.sample(args.rate)
-        document = {
-            "robot": robot.name,
-            "joint_names": list(robot.joint_names),
-            "cost": cost.describe(),
-            "J": J,
-            "duration": duration,
-            **{key: samples[key].tolist() for key in ("t", "q", "qd", "qdd", "tau")},
-            "history": history,
-        }
-        _write_atomically(target, json.dumps(document))
-        print(f"wrote {target} ({samples['t'].size} samples at {args.rate:g} Hz)")
+    result = plan(
+        robot, q0, qe, _cost(args),
+        method=args.method,
+        grid=args.grid,
+        max_iterations=0 if args.stage1_only else args.max_iterations,
+        time_limit=args.time_limit,
+        velocity_limits=not args.no_velocity_limits,
+        position_limits=not args.no_position_limits,
+        verbose=not args.quiet and not args.stage1_only,
+    )
+    print(f"{result.status}: J = {result.J:.6f} (straight line {result.initial.J:.6f}), "
+          f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
+          f"{result.wall_time:.2f} s ({result.message})")
+    if "json" in outputs:
+        print(f"wrote {write_json(result, outputs['json'], args.rate)}")
+    if "csv" in outputs:
+        print(f"wrote {write_csv(result, outputs['csv'], args.rate)}")
+    if "html" in outputs:
+        from .viewer import export_html
+
+        print(f"wrote {export_html(result, outputs['html'])}")
+    if plots is not None:
+        from .figures import save_figures
+
+        for written in save_figures(result, plots):
+            print(f"wrote {written}")
+    if args.show:
+        from .viewer import show
+
+        with show(result) as viewer:
+            print(f"playing at {viewer.url} (meshcat on 127.0.0.1 only); Ctrl+C stops it",
+                  flush=True)
+            try:
+                while True:
+                    time.sleep(1.0)
+            except KeyboardInterrupt:
+                pass
 
 
 def main(argv: Sequence[str] | None = None) -> int:

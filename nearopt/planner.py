@@ -80,6 +80,10 @@ class PlanResult:
 
     Attributes
     ----------
+    robot
+        The arm it was planned for (with the limits that were enforced).
+    cost
+        The running cost f0 that was minimised.
     trajectory
         The motion: θ(t), θ̇(t), θ̈(t), u(t) on [0, duration], from rest at θ0 to rest at θe.
     path
@@ -106,6 +110,8 @@ class PlanResult:
         Stage 1's report on the returned path.
     """
 
+    robot: Robot
+    cost: Cost
     trajectory: Trajectory
     path: Path
     J: float
@@ -155,7 +161,7 @@ def plan(
     control_points
         Interior B-spline control points of the path (``"quasi-newton"``).
     max_iterations
-        Iteration budget (accepted iterates).
+        Iteration budget (accepted iterates); 0 times the straight line only (stage 1).
     time_limit
         Wall-time budget [s]; the best plan so far is returned when it runs out.
     tolerance
@@ -213,7 +219,10 @@ def plan(
 
     if verbose:
         print(_format(history[0]), flush=True)
-    if method == "quasi-newton":
+    if max_iterations == 0:
+        path, status, evaluations = line, "iteration_limit", 1
+        message = "max_iterations = 0: the straight line, timed by stage 1"
+    elif method == "quasi-newton":
         path, status, message, evaluations = _quasi_newton(
             robot, q0, qe, cost, control_points, options, position_limits, max_iterations,
             time_limit, tolerance, t_start, accept,
@@ -227,6 +236,8 @@ def plan(
         )
     timing = optimal_timing(robot, path, cost, **options) if len(history) > 1 else initial
     return PlanResult(
+        robot=robot,
+        cost=cost,
         trajectory=timing.trajectory,
         path=path,
         J=timing.J,

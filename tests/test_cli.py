@@ -25,8 +25,9 @@ def run(*args: str) -> subprocess.CompletedProcess[str]:
 @pytest.mark.parametrize("mode", [[], ["--stage1-only"]], ids=["plan", "stage1-only"])
 def test_plan_writes_the_documented_json(tmp_path: Path, mode: list[str]) -> None:
     target = tmp_path / "plan.json"
+    table = tmp_path / "plan.csv"
     done = run("plan", *PAPER, "--beta", "0.03", "--grid", "100", "--max-iterations", "20",
-               "--quiet", "--json", str(target), "--rate", "500", *mode)
+               "--quiet", "--json", str(target), "--csv", str(table), "--rate", "500", *mode)
     assert done.returncode == 0, done.stderr
     doc = json.loads(target.read_text())
     assert set(doc) == {"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
@@ -49,6 +50,21 @@ def test_plan_writes_the_documented_json(tmp_path: Path, mode: list[str]) -> Non
     history = doc["history"]
     assert history[0]["alpha"] is None and history[-1]["J"] <= history[0]["J"]
     assert (len(history) == 1) == bool(mode)
+    # the CSV holds the same samples, with a header row
+    header, *rows = table.read_text().splitlines()
+    assert header.split(",") == ["t"] + [f"{k}_joint{i}" for k in ("q", "qd", "qdd", "tau")
+                                         for i in (1, 2)]
+    values = np.array([[float(x) for x in row.split(",")] for row in rows])
+    np.testing.assert_array_equal(values, np.column_stack([t, q, qd, qdd, tau]))
+
+
+def test_plots_and_html_are_written(tmp_path: Path) -> None:
+    done = run("plan", *PAPER, "--beta", "0.03", "--grid", "40", "--max-iterations", "3",
+               "--quiet", "--plots", str(tmp_path / "figures"), "--html", str(tmp_path / "a.html"))
+    assert done.returncode == 0, done.stderr
+    assert sorted(p.name for p in (tmp_path / "figures").iterdir()) == [
+        "history.png", "torques.png", "workspace.png"]
+    assert "MeshCat.Viewer" in (tmp_path / "a.html").read_text()
 
 
 @pytest.mark.parametrize(
@@ -66,6 +82,10 @@ def test_plan_writes_the_documented_json(tmp_path: Path, mode: list[str]) -> Non
         (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--beta", "1",
           "--time-optimal"], "not allowed with"),
         (["--q0", "0", "--qe", "1"], "one of the arguments --robot --urdf is required"),
+        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--plots",
+          "/nonexistent/figures"], "does not exist"),
+        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--csv", "/"],
+         "is a directory"),
     ],
 )
 def test_bad_arguments_give_one_line_and_exit_code_2(args: list[str], expected: str) -> None:
