@@ -2,7 +2,8 @@
 
 The package follows the paper "Near-Optimum Trajectory Planning for Robot Manipulators":
 ``robot`` (URDF → Pinocchio: H, h, g, D, limits, derivatives) → ``path`` (θ(s)) → ``timing``
-(stage 1, λ(s)) → ``trajectory`` (θ(t)) → ``path optimisation`` (stage 2) → ``plan``.
+(stage 1, λ(s)) → ``trajectory`` (θ(t)) → ``path optimisation`` (stage 2) → ``plan`` →
+``verify``; ``viewer`` and ``figures`` to look at it, ``export`` to write it.
 """
 
 from .catalog import available_robots
@@ -20,6 +21,7 @@ from .planner import Iteration, PlanResult, plan
 from .robot import JointLimits, PathCoefficients, Robot
 from .timing import TimingResult, optimal_timing
 from .trajectory import Trajectory
+from .verify import VerificationError, VerificationReport, verify
 
 __all__ = [
     "Robot",
@@ -37,6 +39,9 @@ __all__ = [
     "Iteration",
     "TimingResult",
     "Trajectory",
+    "verify",
+    "VerificationReport",
+    "VerificationError",
     "JointLimits",
     "PathCoefficients",
     "available_robots",

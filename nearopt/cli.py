@@ -5,7 +5,9 @@
     nearopt robots
 
 Every failure the user can cause (a bad argument, a bad URDF, an infeasible request) ends with one
-line on stderr, ``nearopt: error: …``, and exit code 2; no output file is written then.
+line on stderr, ``nearopt: error: …``, and exit code 2; no output file is written then. Every plan
+is verified (:func:`nearopt.verify`, at ``--rate``) before anything is written; a motion that fails
+verification ends the same way with exit code 1.
 """
 
 from __future__ import annotations
@@ -24,6 +26,7 @@ from .errors import ConfigurationError, NearoptError
 from .export import check_writable, write_csv, write_json
 from .planner import METHODS, plan
 from .robot import Robot
+from .verify import VerificationError, verify
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -38,9 +41,9 @@ class _Parser(argparse.ArgumentParser):
         _fail(message)
 
 
-def _fail(message: str) -> NoReturn:
+def _fail(message: str, code: int = 2) -> NoReturn:
     print(f"nearopt: error: {' '.join(str(message).split())}", file=sys.stderr)
-    raise SystemExit(2)
+    raise SystemExit(code)
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -75,6 +78,8 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--rate", type=float, default=1000.0, help="JSON/CSV sampling rate [Hz] (1000)")
     p.add_argument("--plots", metavar="DIR", help="write torques.png, workspace.png, history.png")
     p.add_argument("--html", metavar="FILE", help="write the animation as a standalone HTML file")
+    p.add_argument("--verify", action="store_true",
+                   help="print the verification report (every plan is verified before output)")
     p.add_argument("--show", action="store_true",
                    help="play it in the browser (meshcat server on 127.0.0.1) until Ctrl+C")
     p.add_argument("--quiet", action="store_true", help="no per-iteration output")
@@ -124,6 +129,14 @@ def _plan_command(args: argparse.Namespace) -> None:
     print(f"{result.status}: J = {result.J:.6f} (straight line {result.initial.J:.6f}), "
           f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
           f"{result.wall_time:.2f} s ({result.message})")
+    report = verify(
+        result.trajectory, robot, rate=args.rate, q0=q0, qe=qe, cost=result.cost, J=result.J,
+        velocity_limits=not args.no_velocity_limits,
+        position_limits=not args.no_position_limits,
+    )
+    if args.verify:
+        print(report)
+    report.raise_if_failed()  # nothing is written for a motion that fails
     if "json" in outputs:
         print(f"wrote {write_json(result, outputs['json'], args.rate)}")
     if "csv" in outputs:
@@ -158,6 +171,8 @@ def main(argv: Sequence[str] | None = None) -> int:
             print("\n".join(available_robots()))
         else:
             _plan_command(args)
+    except VerificationError as exc:
+        _fail(str(exc), code=1)
     except NearoptError as exc:
         _fail(str(exc))
     except OSError as exc:

@@ -266,8 +266,8 @@ def _check_within(robot: Robot, q: NDArray[np.float64], what: str) -> None:
     for i, name in enumerate(robot.joint_names):
         if not lim.position_lower[i] <= q[i] <= lim.position_upper[i]:
             raise ConfigurationError(
-                f"{what}[{i}] = {q[i]:.6g} rad is outside joint {name!r}'s position limits "
-                f"[{lim.position_lower[i]:.6g}, {lim.position_upper[i]:.6g}]",
+                f"{what}[{i}] = {q[i]:.6g} rad is outside the position limits "
+                f"[{lim.position_lower[i]:.6g}, {lim.position_upper[i]:.6g}] of joint {name!r}",
                 joint=name,
             )
 
@@ -289,8 +289,14 @@ def _quasi_newton(
     """L-BFGS-B on the interior B-spline control points, gradient by the envelope theorem."""
     start = BSplinePath.line(q0, qe, interior)
     n = robot.n
-    sigma = build_timing_problem(robot, start, **options).s
-    basis = [start.basis(sigma, order)[:, 1:-1] for order in range(3)]
+    cache: dict[tuple[bytes, int], NDArray[np.float64]] = {}
+
+    def basis(at: NDArray[np.float64], order: int) -> NDArray[np.float64]:
+        """∂θ^(order)(σ)/∂c of the interior control points at σ (the grid's are reused)."""
+        key = (at.tobytes(), order)
+        if key not in cache:
+            cache[key] = start.basis(at, order)[:, 1:-1]
+        return cache[key]
     ends = start.control_points[[0, -1]]
     evaluations = {"count": 0, "worst": np.inf}
     last: dict[str, object] = {}
@@ -309,7 +315,7 @@ def _quasi_newton(
             # search step back; the gradient is not used there
             return 2.0 * evaluations["worst"], np.zeros_like(x)
         sens = timing_sensitivity(robot, problem, sol.b, cost)
-        grad = basis[0].T @ sens.theta + basis[1].T @ sens.dtheta + basis[2].T @ sens.ddtheta
+        grad = sens.gradient(basis, problem.s)
         last.update(x=x.copy(), J=sol.objective, duration=_duration(problem.s, sol.b))
         if not np.isfinite(evaluations["worst"]):
             evaluations["worst"] = sol.objective

@@ -96,6 +96,8 @@ def _parse_urdf(path: Path, locked: tuple[str, ...]) -> tuple[str, str, list[str
     that θ is an angle in ℝ (Pinocchio would otherwise use (cos θ, sin θ), nq ≠ nv). A ``<limit>``
     missing an attribute gets 0 (= undeclared) so that urdfdom accepts it and nearopt decides.
     """
+    if path.is_dir():
+        raise URDFError(f"{path} is a directory, not a URDF file", path=str(path))
     if not path.is_file():
         raise URDFError(f"URDF file not found: {path}", path=str(path))
     try:

@@ -16,6 +16,7 @@ true KKT point). ∂u/∂θ, ∂u/∂θ̇ and ∂u/∂θ̈ come from Pinocchio's
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -44,6 +45,9 @@ class PathSensitivity:
     theta, dtheta, ddtheta
         ∂J*/∂θ(σ_k), ∂J*/∂θ'(σ_k), ∂J*/∂θ''(σ_k) (derivatives with respect to σ = s/s_e),
         each of shape (N + 1, n).
+    interior_sigma, interior_dtheta
+        The points σ_p inside segments where joint speeds are limited too
+        (:class:`~nearopt.timing.InteriorSpeed`) and ∂J*/∂θ'(σ_p), shape (P,) and (P, n).
     residual
         ‖∇_b Obj + Σ μ ∇_b u + ν‖ / ‖∇_b Obj‖ of the multipliers' fit (≈ 0 at a KKT point).
     """
@@ -52,7 +56,25 @@ class PathSensitivity:
     theta: NDArray[np.float64]
     dtheta: NDArray[np.float64]
     ddtheta: NDArray[np.float64]
+    interior_sigma: NDArray[np.float64]
+    interior_dtheta: NDArray[np.float64]
     residual: float
+
+    def gradient(
+        self,
+        basis: Callable[[NDArray[np.float64], int], NDArray[np.float64]],
+        sigma: NDArray[np.float64],
+    ) -> NDArray[np.float64]:
+        """dJ*/dc for a path θ(σ) = B(σ) c: ``basis(σ, order)`` gives B, B' or B'' at σ.
+
+        ``sigma`` are the grid's knots; returns an array of the shape of c (K, n).
+        """
+        grad = sum(
+            basis(sigma, k).T @ d for k, d in enumerate((self.theta, self.dtheta, self.ddtheta))
+        )
+        if self.interior_sigma.size:
+            grad = grad + basis(self.interior_sigma, 1).T @ self.interior_dtheta
+        return grad
 
 
 def timing_sensitivity(
@@ -93,8 +115,14 @@ def timing_sensitivity(
     jac = disc.torque_jacobian(z).tocsr()
     ub = p.b_upper[1:-1]
     speed = np.flatnonzero(np.isfinite(ub) & (z >= ub * (1.0 - active_tolerance)))
+    inside = np.flatnonzero(disc.speed @ z >= disc.speed_bound * (1.0 - active_tolerance))
     columns = np.hstack(
-        [jac[upper].toarray().T, -jac[lower].toarray().T, np.eye(big_n - 1)[:, speed]]
+        [
+            jac[upper].toarray().T,
+            -jac[lower].toarray().T,
+            np.eye(big_n - 1)[:, speed],
+            disc.speed[inside].toarray().T,
+        ]
     )
     if columns.shape[1]:
         mu, rnorm = nnls(columns, -grad, maxiter=50 * columns.shape[1])
@@ -103,7 +131,8 @@ def timing_sensitivity(
     signed = np.zeros(u_flat.size)
     signed[upper] += mu[: upper.size]
     signed[lower] -= mu[upper.size : upper.size + lower.size]
-    nu = mu[upper.size + lower.size :]
+    nu = mu[upper.size + lower.size : upper.size + lower.size + speed.size]
+    nu_inside = mu[upper.size + lower.size + speed.size :]
 
     # the samples: node, segment, θ, θ̇ = λθ', θ̈ = bθ'' + aθ', u
     node, seg = disc.node, disc.seg
@@ -138,11 +167,24 @@ def timing_sensitivity(
             ratio = np.where(p.dtheta[knots] != 0, v**2 / p.dtheta[knots] ** 2, np.inf)
         joint = np.argmin(ratio, axis=1)
         d1[knots, joint] += nu * 2.0 * v[joint] ** 2 / p.dtheta[knots, joint] ** 3
+    # interior speed rows: bound_p = min_i v_i² / θ'_i(σ_p)²
+    interior = p.interior_speed
+    d_inside = np.zeros((0, n)) if interior is None else np.zeros_like(interior.dtheta)
+    if inside.size:
+        v = robot.limits.velocity
+        slope = interior.dtheta[inside]
+        with np.errstate(divide="ignore"):
+            ratio = np.where(slope != 0, v**2 / slope**2, np.inf)
+        joint = np.argmin(ratio, axis=1)
+        d_inside[inside, joint] = (
+            nu_inside * 2.0 * v[joint] ** 2 / slope[np.arange(inside.size), joint] ** 3
+        )
     return PathSensitivity(
         value=value,
         theta=d0,
         dtheta=d1,
         ddtheta=d2,
+        interior_sigma=np.zeros(0) if interior is None else interior.sigma,
+        interior_dtheta=d_inside,
         residual=float(rnorm / max(np.linalg.norm(grad), 1e-300)),
     )
-

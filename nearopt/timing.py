@@ -51,7 +51,7 @@ import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, replace
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
@@ -78,6 +78,20 @@ __all__ = [
 ]
 
 
+class InteriorSpeed(NamedTuple):
+    """Joint speed limits at points inside the segments: b(σ_p) ≤ bound_p.
+
+    b is linear on a segment, so at σ_p = σ_k + w_p Δσ_k this reads
+    (1 − w_p) b_k + w_p b_{k+1} ≤ bound_p = min_i v_i² / θ'_i(σ_p)².
+    """
+
+    segment: NDArray[np.int64]
+    weight: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    dtheta: NDArray[np.float64]
+    bound: NDArray[np.float64]
+
+
 @dataclass(frozen=True)
 class TimingProblem:
     """Stage 1 on a grid, as arrays (no robot model needed: the kernel's input).
@@ -102,6 +116,9 @@ class TimingProblem:
         Optional torque margins [N·m] at the samples, shape (2N, n): rows 0 … N−1 at the start of
         segments 0 … N−1, rows N … 2N−1 at their ends. Stage 1 keeps each sample this far inside
         both limits; :func:`optimal_timing` sets them where the torque bulges out between samples.
+    interior_speed
+        Joint speed limits at points inside the segments (on a curved path |θ'| peaks between
+        knots); None without speed limits.
     """
 
     s: NDArray[np.float64]
@@ -114,6 +131,7 @@ class TimingProblem:
     b_upper: NDArray[np.float64]
     joint_names: tuple[str, ...]
     margin: NDArray[np.float64] | None = None
+    interior_speed: InteriorSpeed | None = None
 
     @property
     def segments(self) -> int:
@@ -217,10 +235,18 @@ def build_timing_problem(
     ddtheta = path(s, 2) * path.s_end**2
     coef = robot.path_coefficients(theta, dtheta, ddtheta)
     b_upper = np.full(s.size, np.inf)
-    if velocity_limits:
-        v = robot.limits.velocity
-        with np.errstate(divide="ignore"):
-            b_upper = np.min(np.where(dtheta != 0, v**2 / dtheta**2, np.inf), axis=1)
+    interior = None
+    v = robot.limits.velocity
+    if velocity_limits and np.any(np.isfinite(v)):
+        b_upper = _speed_bound(dtheta, v)
+        # three points inside every segment, where |θ'| of a curved path may peak
+        segment = np.repeat(np.arange(grid), 3)
+        weight = np.tile([0.25, 0.5, 0.75], grid)
+        at = sigma[segment] + weight * np.diff(sigma)[segment]
+        d_at = path(at * path.s_end, 1) * path.s_end
+        bound = _speed_bound(d_at, v)
+        keep = np.isfinite(bound)
+        interior = InteriorSpeed(segment[keep], weight[keep], at[keep], d_at[keep], bound[keep])
     return TimingProblem(
         s=sigma,
         theta=theta,
@@ -231,7 +257,15 @@ def build_timing_problem(
         u_upper=np.array(robot.limits.effort_upper),
         b_upper=b_upper,
         joint_names=tuple(robot.joint_names),
+        interior_speed=interior,
     )
+
+
+def _speed_bound(dtheta: NDArray[np.float64], velocity: NDArray[np.float64]) -> NDArray[np.float64]:
+    """min_i v_i² / θ'_i² per row (inf where no joint moves or no limit is finite)."""
+    with np.errstate(divide="ignore", invalid="ignore"):
+        ratio = np.where(dtheta != 0, velocity**2 / dtheta**2, np.inf)
+    return np.min(np.where(np.isnan(ratio), np.inf, ratio), axis=1)
 
 
 # ----------------------------------------------------------------------------- the kernel
@@ -269,6 +303,15 @@ class _Discretisation:
         self.has_damping = bool(np.any(self.damp != 0.0))
         self.lower = np.repeat(p.u_lower, 2 * big_n)
         self.upper = np.repeat(p.u_upper, 2 * big_n)
+        # interior speed limits as rows S z ≤ bound (S ≥ 0)
+        speed = p.interior_speed
+        count = 0 if speed is None else speed.bound.size
+        cols = np.concatenate([speed.segment, speed.segment + 1]) if count else np.zeros(0, int)
+        vals = np.concatenate([1.0 - speed.weight, speed.weight]) if count else np.zeros(0)
+        self.speed = sp.csr_matrix(
+            (vals, (np.tile(np.arange(count), 2), cols)), shape=(count, big_n + 1)
+        )[:, 1:-1].tocsr()
+        self.speed_bound = speed.bound if count else np.zeros(0)
         if p.margin is not None:
             self.lower = self.lower + p.margin.T.ravel()
             self.upper = self.upper - p.margin.T.ravel()
@@ -399,8 +442,8 @@ def _lp(
     ub = disc.problem.b_upper[1:-1]
     res = linprog(
         c,
-        A_ub=sp.vstack([k, -k]).tocsr(),
-        b_ub=np.concatenate([disc.upper - u0, u0 - disc.lower]),
+        A_ub=sp.vstack([k, -k, disc.speed]).tocsr(),
+        b_ub=np.concatenate([disc.upper - u0, u0 - disc.lower, disc.speed_bound]),
         bounds=np.column_stack([np.zeros(ub.size), np.where(np.isfinite(ub), ub, np.nan)]),
         method="highs",
     )
@@ -460,6 +503,10 @@ def _largest_scale(excess: Callable[[float], float]) -> float:
 def _into_limits(disc: _Discretisation, z: NDArray[np.float64]) -> NDArray[np.float64]:
     """Scale b by the largest α ≤ 1 that puts every torque sample within the limits."""
     z = np.minimum(z, disc.problem.b_upper[1:-1])
+    if disc.speed_bound.size:  # the interior speed rows S z ≤ bound, S ≥ 0
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = disc.speed_bound / (disc.speed @ z)
+        z = z * min(1.0, float(np.nanmin(np.where(ratio > 0, ratio, np.inf))))
 
     def excess(alpha: float) -> float:
         u = disc.torque(alpha * z)
@@ -513,15 +560,17 @@ def _socp(
         trip_c.append(np.asarray(c, dtype=np.int64))
         trip_v.append(np.asarray(v, dtype=float))
 
-    # 1. torque limits, b ≥ 0 and b ≤ b_upper: A x + s = rhs, s ≥ 0
+    # 1. torque limits, b ≥ 0, b ≤ b_upper, interior speed limits: A x + s = rhs, s ≥ 0
     kk = k_mat.tocoo()
     m_rows = k_mat.shape[0]
     put(kk.row, kk.col + iz, kk.data)
     put(kk.row + m_rows, kk.col + iz, -kk.data)
     put(2 * m_rows + np.arange(nz), iz + np.arange(nz), -np.ones(nz))
     put(2 * m_rows + nz + np.arange(finite.size), iz + finite, np.ones(finite.size))
-    rhs += [disc.upper - u0, u0 - disc.lower, np.zeros(nz), ub[finite]]
-    n_lin = 2 * m_rows + nz + finite.size
+    ss = disc.speed.tocoo()
+    put(2 * m_rows + nz + finite.size + ss.row, iz + ss.col, ss.data)
+    rhs += [disc.upper - u0, u0 - disc.lower, np.zeros(nz), ub[finite], disc.speed_bound]
+    n_lin = 2 * m_rows + nz + finite.size + ss.shape[0]
     cones: list[object] = [clarabel.NonnegativeConeT(n_lin)]
     row0 += n_lin
 
@@ -733,7 +782,12 @@ def _solve_nlp(
             hess=hess,
             method="trust-constr",
             bounds=Bounds(lb, ub),
-            constraints=[constraint],
+            constraints=[constraint]
+            + (
+                [LinearConstraint(disc.speed, -np.inf, disc.speed_bound)]
+                if disc.speed.shape[0]
+                else []
+            ),
             options={
                 "gtol": tolerance,
                 "xtol": tolerance,
@@ -756,12 +810,15 @@ def _solve_nlp(
 
 
 class _Between:
-    """The torque between the samples: inside every segment and closely next to both rest ends.
+    """The motion between the samples: inside every segment and closely next to both rest ends.
 
-    The limits are imposed at both ends of every segment; in between, the torque along the exact
-    path can bulge out by O(Δs²) (or O(√Δs) next to a rest end with damping). It is evaluated at
-    ``points`` interior points of every segment and at points geometrically closer to σ = 0 and 1
-    (at rest b ∝ σ, so a damping torque d√b rises like √σ there).
+    The limits are imposed at the samples; in between, the torque and the joint speeds along the
+    exact path can bulge out by O(Δs²) (or O(√Δs) next to a rest end with damping). They are
+    evaluated at ``points`` interior points of every segment, and between neighbouring points
+    (h apart) bounded by max(f(a), f(c)) + h² max|f''| / 8 with h² f'' taken from second
+    differences (the error bound of linear interpolation), so that the check covers the whole
+    segment, not only its points. Next to the rest ends the torque is also evaluated at points
+    geometrically closer to σ = 0 and 1 (at rest b ∝ σ, so a damping torque d√b rises like √σ).
     """
 
     def __init__(self, robot: Robot, path: Path, problem: TimingProblem, points: int = 8) -> None:
@@ -776,88 +833,84 @@ class _Between:
         s = (problem.s[self.seg] + self.where * self.ds[self.seg]) * path.s_end
         self.points = points
         self.dtheta = path(s, 1) * path.s_end
-        self.ddtheta = path(s, 2) * path.s_end**2
-        self.coef = robot.path_coefficients(path(s, 0), self.dtheta, self.ddtheta)
+        self.coef = robot.path_coefficients(path(s, 0), self.dtheta, path(s, 2) * path.s_end**2)
         self.problem = problem
 
-    def _speed_terms(
-        self, b: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-        """Bounds on b and on |θ'| over each interval between neighbouring points.
+    def _along(
+        self, first: NDArray[np.float64], inner: NDArray[np.float64], last: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Values at the start, the interior points and the end of every segment, (N, P + 2, n)."""
+        big_n, points = self.problem.segments, self.points
+        inner = inner[: big_n * points].reshape(big_n, points, -1)
+        return np.concatenate([first[:, None], inner, last[:, None]], axis=1)
 
-        Between two neighbouring points a, c of a segment (knots and interior points, h apart)
-        |θ'| ≤ max(|θ'(a)|, |θ'(c)|) + h² max|θ‴| / 8, with θ‴ taken as (θ''(c) − θ''(a)) / h
-        (exact on a cubic piece), and b ≤ max(b(a), b(c)) since b is linear.
-
-        Returns
-        -------
-        (b_pair, slope)
-            Shapes (N, points + 1, 1) and (N, points + 1, n).
-        """
-        p, points = self.problem, self.points
-        big_n = p.segments
-        inner = slice(0, big_n * points)
-        d1, d2 = (
-            np.concatenate(
-                [ends[:-1, None], mid[inner].reshape(big_n, points, -1), ends[1:, None]], axis=1
-            )
-            for ends, mid in ((p.dtheta, self.dtheta), (p.ddtheta, self.ddtheta))
+    @staticmethod
+    def _envelope(v: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Upper and lower bounds of a smooth function on each interval between points."""
+        curvature = np.abs(v[:, :-2] - 2.0 * v[:, 1:-1] + v[:, 2:])
+        curvature = np.concatenate([curvature[:, :1], curvature, curvature[:, -1:]], axis=1)
+        margin = np.maximum(curvature[:, :-1], curvature[:, 1:]) / 8.0
+        return (
+            np.maximum(v[:, :-1], v[:, 1:]) + margin,
+            np.minimum(v[:, :-1], v[:, 1:]) - margin,
         )
-        h = (self.ds / (points + 1))[:, None, None]
-        slope = np.maximum(np.abs(d1[:, :-1]), np.abs(d1[:, 1:]))
-        slope = slope + h * np.abs(np.diff(d2, axis=1)) / 8.0
-        frac = np.arange(points + 2) / (points + 1)
-        b_pts = b[:-1, None] + frac[None, :] * (b[1:] - b[:-1])[:, None]
-        return np.maximum(b_pts[:, :-1], b_pts[:, 1:])[:, :, None], slope
 
-    def speed_excess(
-        self, b: NDArray[np.float64], velocity: NDArray[np.float64]
-    ) -> tuple[NDArray[np.bool_], NDArray[np.float64]]:
-        """Segments where |θ̇_i| = |θ'_i| √b may exceed v_i, and bounds on b that prevent it.
-
-        A segment violates if b |θ'|² (see :meth:`_speed_terms`) exceeds v² on any of its
-        intervals; bounding b at both its knots by v_i² / max|θ'_i|² over the whole segment (the
-        returned bound) rules that out.
-
-        Returns
-        -------
-        (violates, bound)
-            Shapes (N,) and (N,).
-        """
-        b_pair, slope = self._speed_terms(b)
-        violates = np.any(b_pair * slope**2 > velocity**2 * (1.0 + 1e-12), axis=(1, 2))
-        with np.errstate(divide="ignore"):
-            bound = np.min(velocity**2 / np.max(slope, axis=1) ** 2, axis=1)
-        return violates, bound
-
-    def speed_scale(self, b: NDArray[np.float64], velocity: NDArray[np.float64]) -> float:
-        """The largest α ≤ 1 such that αb keeps every joint speed within its limit."""
-        b_pair, slope = self._speed_terms(b)
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = velocity**2 / (b_pair * slope**2)
-        return float(min(1.0, np.nanmin(ratio)))
-
-    def excess(self, b: NDArray[np.float64], alpha: float = 1.0) -> NDArray[np.float64]:
-        """max(u − u_max, u_min − u) at every point for the profile αb, shape (M, n)."""
+    def _torques(self, b: NDArray[np.float64], alpha: float) -> NDArray[np.float64]:
+        """u at every point (interior, then near the rest ends) for the profile αb, (M, n)."""
         seg, c = self.seg, self.coef
         acc = (np.diff(b) / (2.0 * self.ds))[seg, None]
         bb = (b[seg] + self.where * (b[seg + 1] - b[seg]))[:, None]
-        u = c.g + alpha * (c.m * acc + c.c * bb) + np.sqrt(alpha) * c.d * np.sqrt(bb)
-        return np.maximum(u - self.problem.u_upper, self.problem.u_lower - u)
+        return c.g + alpha * (c.m * acc + c.c * bb) + np.sqrt(alpha) * c.d * np.sqrt(bb)
 
-    def per_segment(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
-        """The worst excess in every segment, per joint, shape (N, n)."""
-        worst = np.full((self.problem.segments, self.problem.dof), -np.inf)
-        np.maximum.at(worst, self.seg, self.excess(b))
+    def excess(self, b: NDArray[np.float64], alpha: float = 1.0) -> NDArray[np.float64]:
+        """The worst of u − u_max and u_min − u in every segment for αb, per joint, (N, n)."""
+        p = self.problem
+        k = p.coef
+        acc = (np.diff(b) / (2.0 * self.ds))[:, None]
+
+        def knot(at: slice) -> NDArray[np.float64]:
+            bk = b[at][:, None]
+            lin = k.m[at] * acc + k.c[at] * bk
+            return k.g[at] + alpha * lin + np.sqrt(alpha) * k.d[at] * np.sqrt(bk)
+
+        u = self._torques(b, alpha)
+        hi, lo = self._envelope(self._along(knot(slice(0, -1)), u, knot(slice(1, None))))
+        worst = np.max(np.maximum(hi - p.u_upper, p.u_lower - lo), axis=1)
+        near = u[p.segments * self.points :]
+        near_excess = np.maximum(near - p.u_upper, p.u_lower - near)
+        np.maximum.at(worst, self.seg[p.segments * self.points :], near_excess)
         return worst
 
     def scale_into_limits(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
-        """b scaled by the largest α ≤ 1 that keeps every point within the limits.
+        """b scaled by the largest α ≤ 1 that keeps the torques within the limits everywhere.
 
         Since u(αb) = g + α(m a + c b) + √α dλ, a uniform α (found by bisection) restores the
         limits at the cost of a relative slow-down of the order of the bulge.
         """
         return _largest_scale(lambda alpha: float(np.max(self.excess(b, alpha)))) * b
+
+    def _speed_squared(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Upper bounds of θ̇_i² = b θ'_i² on each interval between points, (N, P + 1, n)."""
+        p = self.problem
+        frac = np.arange(self.points + 2) / (self.points + 1)
+        b_pts = b[:-1, None] + frac[None, :] * (b[1:] - b[:-1])[:, None]
+        slope = self._along(p.dtheta[:-1], self.dtheta, p.dtheta[1:])
+        return self._envelope(b_pts[:, :, None] * slope**2)[0]
+
+    def speed_excess(
+        self, b: NDArray[np.float64], velocity: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """The factor (≤ 1 where a joint speed may exceed its limit) by which b must shrink in
+        every segment to keep all joint speeds within their limits, shape (N,)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = velocity**2 / self._speed_squared(b)
+        return np.min(np.where(ratio > 0, ratio, np.inf), axis=(1, 2))
+
+    def speed_scale(self, b: NDArray[np.float64], velocity: NDArray[np.float64]) -> float:
+        """The largest α ≤ 1 such that αb keeps every joint speed within its limit (θ̇² ∝ α)."""
+        with np.errstate(divide="ignore", invalid="ignore"):
+            ratio = velocity**2 / self._speed_squared(b)
+        return float(min(1.0, np.nanmin(np.where(ratio > 0, ratio, np.inf))))
 
 
 def _uniform_slow_down(
@@ -878,14 +931,11 @@ def _tighten(
 
     A segment whose torque exceeds a limit by e between its samples gets margin 1.5 e more at
     both its samples (capped so gravity stays strictly inside the tightened limits); a segment
-    whose joint speed may exceed a limit gets the speed bound of its whole length at its knots.
+    whose joint speed would have to shrink b by a factor r < 1 gets b ≤ r b at both its knots.
     """
-    worst = between.per_segment(b)
-    slow, bound = (
-        (np.zeros(problem.segments, bool), None)
-        if velocity is None
-        else between.speed_excess(b, velocity)
-    )
+    worst = between.excess(b)
+    ratio = np.ones(problem.segments) if velocity is None else between.speed_excess(b, velocity)
+    slow = ratio < 1.0
     if not np.any(worst > 0) and not np.any(slow):
         return None
     big_n = problem.segments
@@ -896,10 +946,9 @@ def _tighten(
     g = problem.coef.g[node]
     room = np.minimum(problem.u_upper - g, g - problem.u_lower)
     b_upper = problem.b_upper.copy()
-    if np.any(slow):
-        seg = np.flatnonzero(slow)
-        b_upper[seg] = np.minimum(b_upper[seg], bound[seg])
-        b_upper[seg + 1] = np.minimum(b_upper[seg + 1], bound[seg])
+    seg = np.flatnonzero(slow)
+    for knots in (seg, seg + 1):
+        b_upper[knots] = np.minimum(b_upper[knots], (1.0 - 1e-9) * ratio[seg] * b[knots])
     return replace(problem, margin=np.minimum(margin, 0.9 * room), b_upper=b_upper)
 
 

@@ -1,0 +1,264 @@
+"""Check a motion independently of the planner's bookkeeping, as a controller would run it.
+
+:func:`verify` samples the trajectory at the controller's rate and recomputes everything from the
+robot model with Pinocchio directly: the torques by RNEA (+ D θ̇) from the sampled (θ, θ̇, θ̈), the
+joint limits, the end states, J, and where the torques u(t) take the arm when integrated with ABA.
+It returns a report with the worst value of every check; nothing the planner computed is reused
+but the motion itself.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+from scipy.integrate import solve_ivp
+
+from .errors import ConfigurationError, NearoptError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, NDArray
+
+    from .cost import Cost
+    from .robot import Robot
+    from .trajectory import Trajectory
+
+__all__ = ["Check", "VerificationReport", "VerificationError", "verify"]
+
+
+class VerificationError(NearoptError):
+    """A motion failed verification; ``report`` says which checks and by how much."""
+
+    def __init__(self, message: str, report: VerificationReport) -> None:
+        super().__init__(message)
+        self.report = report
+
+
+@dataclass(frozen=True)
+class Check:
+    """One check: its worst value over the motion against a tolerance.
+
+    Attributes
+    ----------
+    name
+        What is checked.
+    worst
+        The worst value found (for limits: the largest excess beyond a limit, negative when every
+        sample is inside, relative to the limit where ``unit`` is "relative").
+    tolerance
+        The largest acceptable ``worst``.
+    unit
+        Unit of ``worst`` and ``tolerance``.
+    where
+        Where the worst value occurs (time, joint), in words.
+    """
+
+    name: str
+    worst: float
+    tolerance: float
+    unit: str
+    where: str
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.worst <= self.tolerance)
+
+
+@dataclass(frozen=True)
+class VerificationReport:
+    """The checks of :func:`verify`, at the rate they were made."""
+
+    checks: tuple[Check, ...]
+    rate: float
+    samples: int
+
+    @property
+    def passed(self) -> bool:
+        """True if every check passed."""
+        return all(c.passed for c in self.checks)
+
+    def __getitem__(self, name: str) -> Check:
+        for check in self.checks:
+            if check.name == name:
+                return check
+        raise KeyError(name)
+
+    def failures(self) -> list[Check]:
+        """The checks that failed."""
+        return [c for c in self.checks if not c.passed]
+
+    def __str__(self) -> str:
+        lines = [f"verification at {self.rate:g} Hz ({self.samples} samples):"]
+        for c in self.checks:
+            mark = "ok  " if c.passed else "FAIL"
+            lines.append(
+                f"  {mark} {c.name:<28} worst {c.worst:+.3e} (tolerance {c.tolerance:.1e} "
+                f"{c.unit}) {c.where}"
+            )
+        return "\n".join(lines)
+
+    def raise_if_failed(self) -> None:
+        """Raise :class:`VerificationError` naming the failed checks."""
+        failed = self.failures()
+        if failed:
+            worst = "; ".join(
+                f"{c.name}: {c.worst:.3g} {c.unit} > {c.tolerance:.1g} {c.where}" for c in failed
+            )
+            raise VerificationError(f"the motion failed verification: {worst}", self)
+
+
+def _excess(values: NDArray, lower: NDArray, upper: NDArray, scale: NDArray) -> NDArray:
+    with np.errstate(invalid="ignore"):
+        return np.maximum(values - upper, lower - values) / scale
+
+
+def _where(t: NDArray, joints: list[str], index: tuple[int, int]) -> str:
+    k, i = index
+    return f"at t = {t[k]:.6g} s, joint {joints[i]!r}"
+
+
+def verify(
+    trajectory: Trajectory,
+    robot: Robot,
+    *,
+    rate: float = 1000.0,
+    q0: ArrayLike | None = None,
+    qe: ArrayLike | None = None,
+    cost: Cost | None = None,
+    J: float | None = None,
+    velocity_limits: bool = True,
+    position_limits: bool = True,
+    torque_tolerance: float = 1e-6,
+    limit_tolerance: float = 1e-9,
+    end_tolerance: float = 1e-8,
+    cost_tolerance: float = 1e-4,
+    simulation_tolerance: float = 1e-5,
+    window: float = 0.25,
+) -> VerificationReport:
+    """Check a motion at a controller rate, from the robot model alone.
+
+    Parameters
+    ----------
+    trajectory
+        The motion (:attr:`PlanResult.trajectory`, :attr:`TimingResult.trajectory`).
+    robot
+        The arm, with the limits to check against.
+    rate
+        Controller rate [Hz]: the motion is sampled from 0 to t_e inclusive at this rate.
+    q0, qe
+        Expected start and goal [rad]; default: the motion's own ends (then only rest is checked).
+    cost, J
+        If both are given, J is recomputed as ∫ f0 dt by the trapezoidal rule on samples at
+        max(rate, 20 kHz) and compared with ``J`` (relative ``cost_tolerance``).
+    velocity_limits, position_limits
+        Check the robot's joint speed / position limits.
+    torque_tolerance
+        Largest acceptable torque beyond a limit, relative to max(|u_min|, |u_max|).
+    limit_tolerance
+        Largest acceptable speed beyond a limit (relative) and position beyond a limit [rad].
+    end_tolerance
+        Largest acceptable |θ(0) − θ0|, |θ(t_e) − θe| [rad] and end speed [rad/s].
+    cost_tolerance
+        Relative tolerance of J.
+    simulation_tolerance
+        Largest acceptable error [rad] of the simulated end position; the end speed may be off by
+        ten times that [rad/s].
+    window
+        The forward simulation restarts from the motion's own state every ``window`` s: open-loop
+        integration amplifies any error at the rate of the arm's unstable (gravity) modes, so over
+        seconds it would measure that instability, not the motion. The largest mismatch at the end
+        of a window is reported as the simulation defect.
+
+    Raises
+    ------
+    ConfigurationError
+        If the rate is not positive or q0 / qe have the wrong length.
+    """
+    if not (np.isfinite(rate) and rate > 0):
+        raise ConfigurationError(f"the controller rate must be > 0 Hz, got {rate}")
+    n, names, lim = robot.n, list(robot.joint_names), robot.limits
+    samples = trajectory.sample(rate)
+    t, q, qd, qdd = (samples[k] for k in ("t", "q", "qd", "qdd"))
+    model, data = robot.model, robot.model.createData()
+    u = np.array(
+        [pin.rnea(model, data, *x) + robot.damping * x[1] for x in zip(q, qd, qdd, strict=True)]
+    )
+    checks = []
+    scale = np.maximum(np.abs(lim.effort_lower), np.abs(lim.effort_upper))
+    excess = _excess(u, lim.effort_lower, lim.effort_upper, scale)
+    worst = np.unravel_index(np.argmax(excess), excess.shape)
+    checks.append(Check("torque limits (RNEA)", float(excess[worst]), torque_tolerance,
+                        "relative", _where(t, names, worst)))
+    if velocity_limits:
+        excess = _excess(qd, -lim.velocity, lim.velocity, lim.velocity)
+        worst = np.unravel_index(np.argmax(excess), excess.shape)
+        checks.append(Check("joint speed limits", float(excess[worst]), limit_tolerance,
+                            "relative", _where(t, names, worst)))
+    if position_limits:
+        excess = _excess(q, lim.position_lower, lim.position_upper, np.ones(n))
+        worst = np.unravel_index(np.argmax(excess), excess.shape)
+        checks.append(Check("joint position limits", float(excess[worst]), limit_tolerance,
+                            "rad", _where(t, names, worst)))
+    start = q[0] if q0 is None else robot.check_configuration(q0, "q0")
+    goal = q[-1] if qe is None else robot.check_configuration(qe, "qe")
+    ends = np.abs(np.vstack([q[0] - start, q[-1] - goal]))
+    k, i = np.unravel_index(np.argmax(ends), ends.shape)
+    checks.append(Check("end positions", float(ends[k, i]), end_tolerance, "rad",
+                        f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}"))
+    rest = np.abs(qd[[0, -1]])
+    k, i = np.unravel_index(np.argmax(rest), rest.shape)
+    checks.append(Check("rest at both ends", float(rest[k, i]), end_tolerance, "rad/s",
+                        f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}"))
+    if cost is not None and J is not None:
+        fine = trajectory.sample(max(rate, 20000.0))
+        uf = np.array([
+            pin.rnea(model, data, *x) + robot.damping * x[1]
+            for x in zip(fine["q"], fine["qd"], fine["qdd"], strict=True)
+        ])
+        recomputed = float(np.trapezoid(cost(fine["q"], fine["qd"], uf), fine["t"]))
+        checks.append(Check("J recomputed", abs(recomputed - J) / max(abs(J), 1e-12),
+                            cost_tolerance, "relative",
+                            f"(∫ f0 dt = {recomputed:.8g}, J = {J:.8g})"))
+    x_end, defect = _simulate(robot, trajectory, window)
+    checks.append(Check("simulated end position", float(np.max(np.abs(x_end[:n] - goal))),
+                        simulation_tolerance, "rad", "forward simulation of u(t) with ABA"))
+    checks.append(Check("simulated end speed", float(np.max(np.abs(x_end[n:]))),
+                        10 * simulation_tolerance, "rad/s", "forward simulation of u(t) with ABA"))
+    checks.append(Check("simulation window defect", defect, 10 * simulation_tolerance,
+                        "rad or rad/s", f"largest mismatch at the end of a {window:g} s window"))
+    return VerificationReport(tuple(checks), float(rate), int(t.size))
+
+
+def _simulate(
+    robot: Robot, trajectory: Trajectory, window: float
+) -> tuple[NDArray[np.float64], float]:
+    """Integrate θ̈ = ABA(θ, θ̇, u(t) − Dθ̇) under the motion's torques, in restarted windows.
+
+    The torque jumps where the path acceleration changes (the knots), so each window is also cut
+    there. Returns the simulated end state and the largest window defect.
+    """
+    model, data, n = robot.model, robot.model.createData(), robot.n
+
+    def rhs(tau: float, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        u = trajectory.torque(np.array([tau]))[0] - robot.damping * x[n:]
+        return np.concatenate([x[n:], pin.aba(model, data, x[:n], x[n:], u)])
+
+    def state(tau: float) -> NDArray[np.float64]:
+        q, qd, _ = trajectory.states(np.array([tau]))
+        return np.concatenate([q[0], qd[0]])
+
+    te, knots = trajectory.duration, trajectory.t
+    defect, x = 0.0, state(0.0)
+    for w0 in np.arange(0.0, te, window):
+        w1 = min(w0 + window, te)
+        x = state(w0)
+        cuts = np.concatenate([[w0], knots[(knots > w0) & (knots < w1)], [w1]])
+        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+            sol = solve_ivp(rhs, (a, b - 1e-12 * max(1.0, b)), x, method="DOP853",
+                            rtol=1e-10, atol=1e-12)
+            x = sol.y[:, -1]
+        if w1 < te:
+            defect = max(defect, float(np.max(np.abs(x - state(w1)))))
+    return x, defect
