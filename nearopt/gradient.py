@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.integrate import solve_bvp, solve_ivp
 
-from .errors import InfeasiblePathError
+from .errors import InfeasiblePathError, SolverError
 from .path import Path, SplinePath
 from .timing import TimingResult, optimal_timing
 
@@ -225,7 +225,7 @@ def paper_iterations(
                         continue
                 try:
                     timing = optimal_timing(robot, candidate, cost, **options)
-                except InfeasiblePathError:
+                except (InfeasiblePathError, SolverError):
                     continue
                 evaluations += 1
                 if best is None or timing.objective < best[0].objective:

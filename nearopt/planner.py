@@ -29,7 +29,7 @@ import numpy as np
 from scipy.optimize import Bounds, minimize
 
 from .cost import Cost, TimeCost
-from .errors import ConfigurationError, InfeasiblePathError
+from .errors import ConfigurationError, InfeasiblePathError, SolverError
 from .path import BSplinePath, Path, StraightPath
 from .sensitivity import timing_sensitivity
 from .timing import TimingResult, build_timing_problem, optimal_timing, solve_timing
@@ -235,6 +235,9 @@ def plan(
             tolerance, t_start, accept,
         )
     timing = optimal_timing(robot, path, cost, **options) if len(history) > 1 else initial
+    if timing.J > initial.J:  # the iterates improved stage 1's grid J, the motion did not
+        path, timing = line, initial
+        message += "; the straight line is returned: the last iterate's motion costs more"
     return PlanResult(
         robot=robot,
         cost=cost,
@@ -310,9 +313,9 @@ def _quasi_newton(
         try:
             problem = build_timing_problem(robot, path, **options)
             sol = solve_timing(problem, cost)
-        except InfeasiblePathError:
-            # outside the feasible region: a value above every feasible one makes the line
-            # search step back; the gradient is not used there
+        except (InfeasiblePathError, SolverError):
+            # outside the feasible region (or a path the solver cannot time): a value above
+            # every feasible one makes the line search step back; the gradient is not used there
             return 2.0 * evaluations["worst"], np.zeros_like(x)
         sens = timing_sensitivity(robot, problem, sol.b, cost)
         grad = sens.gradient(basis, problem.s)

@@ -709,7 +709,12 @@ def _solve_convex(
     solutions = []
 
     def socp(z_lin: NDArray[np.float64]) -> NDArray[np.float64]:
-        z_new, sol = _socp(disc, weights, z_lin, tolerance)
+        # Clarabel may stop short of a 1e-9 gap ("InsufficientProgress") on badly scaled paths:
+        # then the same problem is solved to 10 and 100 times looser tolerances
+        for tol in (tolerance, 10.0 * tolerance, 100.0 * tolerance):
+            z_new, sol = _socp(disc, weights, z_lin, tol)
+            if "Solved" in str(sol.status):
+                break
         solutions.append(sol)
         return z_new
 

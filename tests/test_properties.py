@@ -1,0 +1,44 @@
+"""Seeded random requests on every arm: each plan verifies or raises a documented error, and the
+same request gives the same motion."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import ROBOT_NAMES, load, random_configuration
+
+import nearopt
+
+SEEDS = range(5)
+COSTS = [nearopt.TimeCost(), nearopt.TorqueCost(0.03)]
+BUDGET = {"grid": 40, "control_points": 6, "max_iterations": 5}
+
+
+@pytest.mark.parametrize("seed", SEEDS)
+def test_random_plans_verify_or_raise_a_documented_error(robot: nearopt.Robot, seed: int) -> None:
+    rng = np.random.default_rng([seed, ROBOT_NAMES.index(robot.name)])
+    q0, qe = random_configuration(robot, rng), random_configuration(robot, rng)
+    cost = COSTS[seed % 2]
+    try:
+        result = nearopt.plan(robot, q0, qe, cost, **BUDGET)
+    except nearopt.InfeasiblePathError as exc:  # documented: gravity beyond a limit on the line
+        assert exc.joint in robot.joint_names
+        return
+    report = nearopt.verify(result.trajectory, robot, rate=1000.0, q0=q0, qe=qe, cost=cost,
+                            J=result.J)
+    assert report.passed, str(report)
+    assert result.J <= result.initial.J
+
+
+@pytest.mark.parametrize("name", ["two_link", "panda"])
+def test_the_same_request_gives_the_same_motion(name: str) -> None:
+    robot = load(name)
+    rng = np.random.default_rng(7)
+    q0, qe = random_configuration(robot, rng), random_configuration(robot, rng)
+    first, second = (nearopt.plan(robot, q0, qe, nearopt.TorqueCost(0.03), **BUDGET)
+                     for _ in range(2))
+    assert first.J == second.J
+    assert [it.J for it in first.history] == [it.J for it in second.history]
+    a, b = first.trajectory.sample(1000.0), second.trajectory.sample(1000.0)
+    for key in a:
+        np.testing.assert_array_equal(a[key], b[key])

@@ -1,0 +1,65 @@
+"""verify(): passes a planned motion and catches each kind of broken one."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import load
+
+import nearopt
+from nearopt import Trajectory, VerificationError, verify
+
+COST = nearopt.TorqueCost(0.03)
+THETA_0, THETA_E = np.deg2rad([45.0, -90.0]), np.deg2rad([-90.0, 0.0])
+
+
+@pytest.fixture(scope="module")
+def plan() -> nearopt.PlanResult:
+    return nearopt.plan(load("two_link"), THETA_0, THETA_E, COST, grid=60, max_iterations=20)
+
+
+def test_a_plan_passes_every_check(plan: nearopt.PlanResult) -> None:
+    report = verify(plan.trajectory, plan.robot, rate=500.0, q0=THETA_0, qe=THETA_E, cost=COST,
+                    J=plan.J)
+    assert report.passed, str(report)
+    assert [c.name for c in report.checks] == [
+        "torque limits (RNEA)", "joint speed limits", "joint position limits", "end positions",
+        "rest at both ends", "J recomputed", "simulated end position", "simulated end speed",
+        "simulation window defect"]
+    assert report.samples == int(np.floor(plan.duration * 500)) + 1 + 1  # 0 … te inclusive
+    assert report["torque limits (RNEA)"].worst < 0  # strictly inside somewhere short of limits
+    report.raise_if_failed()
+
+
+def test_a_faster_motion_breaks_the_torque_limits(plan: nearopt.PlanResult) -> None:
+    traj = plan.trajectory
+    fast = Trajectory(traj.path, traj.s, traj.b * 1.5, plan.robot.inverse_dynamics_batch)
+    report = verify(fast, plan.robot)
+    assert [c.name for c in report.failures()] == ["torque limits (RNEA)"]
+    assert "joint" in report["torque limits (RNEA)"].where
+    with pytest.raises(VerificationError, match="torque limits"):
+        report.raise_if_failed()
+
+
+def test_wrong_goal_limits_and_cost_are_caught(plan: nearopt.PlanResult) -> None:
+    robot, traj = plan.robot, plan.trajectory
+    assert not verify(traj, robot, qe=THETA_E + 1e-6)["end positions"].passed
+    assert not verify(traj, robot, cost=COST, J=plan.J * 1.01)["J recomputed"].passed
+    slow = robot.with_limits(velocity=[5.0, 5.0])
+    assert not verify(traj, slow)["joint speed limits"].passed
+    narrow = robot.with_limits(position=([-1.0, -2.0], [1.0, 2.0]))  # θ0 = 0.785, θe = −1.57
+    assert not verify(traj, narrow)["joint position limits"].passed
+
+
+def test_forward_simulation_catches_a_model_mismatch(plan: nearopt.PlanResult) -> None:
+    """The same motion checked on an arm with damping it was not planned for: u(t) of the plan
+    does not take the damped arm to θe, and RNEA wants more torque."""
+    damped = plan.robot.with_limits(damping=[0.5, 0.5])
+    report = verify(plan.trajectory, damped)
+    failed = {c.name for c in report.failures()}
+    assert {"simulated end position", "simulation window defect"} <= failed
+
+
+def test_rate_must_be_positive(plan: nearopt.PlanResult) -> None:
+    with pytest.raises(nearopt.ConfigurationError, match="rate"):
+        verify(plan.trajectory, plan.robot, rate=0.0)
