@@ -39,6 +39,7 @@ test: setup $(CHROMIUM)
 bench: setup
 	$(BIN)/python scripts/bench_dynamics.py
 	$(BIN)/python scripts/bench_timing.py
+	$(BIN)/python scripts/bench_planner.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache

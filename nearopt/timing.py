@@ -245,7 +245,9 @@ def build_timing_problem(
         at = sigma[segment] + weight * np.diff(sigma)[segment]
         d_at = path(at * path.s_end, 1) * path.s_end
         bound = _speed_bound(d_at, v)
-        keep = np.isfinite(bound)
+        # b(σ_p) is a convex combination of b_k and b_{k+1}: a row is redundant where the knots'
+        # own bounds already imply it (always, on a straight line)
+        keep = bound < np.maximum(b_upper[segment], b_upper[segment + 1])
         interior = InteriorSpeed(segment[keep], weight[keep], at[keep], d_at[keep], bound[keep])
     return TimingProblem(
         s=sigma,
@@ -494,7 +496,7 @@ def _largest_scale(excess: Callable[[float], float]) -> float:
     if excess(1.0) <= 0.0:
         return 1.0
     lo, hi = 0.0, 1.0
-    for _ in range(60):
+    for _ in range(30):  # α to 1e-9 (a feasible lower bound)
         mid = 0.5 * (lo + hi)
         lo, hi = (mid, hi) if excess(mid) <= 0.0 else (lo, mid)
     return lo

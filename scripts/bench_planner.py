@@ -28,13 +28,12 @@ IPOPT: building the NLP and solving it), iterations and, for two_link, the nearo
 from __future__ import annotations
 
 import argparse
-import time
-from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
 import numpy as np
+from benchlib import median_time
 
 import nearopt
 
@@ -251,29 +250,6 @@ def nearopt_row(robot: nearopt.Robot, q0: np.ndarray, qe: np.ndarray, repeat: in
                                                  **options), repeat)
     return Row(f"nearopt {robot.name}", res.J, res.duration, wall, len(res.history) - 1,
                res.status)
-
-
-def median_time(fn: Callable[[], Any], repeat: int) -> tuple[float, Any]:
-    """Median wall time of ``repeat`` calls of ``fn`` and the last call's result.
-
-    Parameters
-    ----------
-    fn
-        What to time.
-    repeat
-        Number of calls.
-
-    Returns
-    -------
-    tuple
-        The median time [s] and the last result.
-    """
-    times, out = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)), out
 
 
 def print_row(row: Row) -> None:

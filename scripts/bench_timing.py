@@ -10,11 +10,11 @@ time on the same grid with the ratios.
 from __future__ import annotations
 
 import argparse
-import time
 
 import numpy as np
 import pinocchio as pin
 import toppra as ta
+from benchlib import median_time
 
 import nearopt
 import nearopt.timing
@@ -46,15 +46,6 @@ def toppra_duration(robot: nearopt.Robot, path: nearopt.StraightPath, grid: int)
     knots = nearopt.timing.build_timing_problem(robot, path, grid=grid).s
     algo = ta.algorithm.TOPPRA(constraints, spline, gridpoints=knots)
     return algo.compute_trajectory(0, 0).duration
-
-
-def median_time(fn, repeat: int) -> tuple[float, object]:
-    times, out = [], None
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        out = fn()
-        times.append(time.perf_counter() - t0)
-    return float(np.median(times)), out
 
 
 def main() -> None:
