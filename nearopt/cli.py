@@ -23,7 +23,7 @@ import numpy as np
 from .catalog import available_robots
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, NearoptError
-from .export import check_writable, write_csv, write_json
+from .export import check_writable, csv_text, json_text, write_all
 from .planner import METHODS, plan
 from .robot import Robot
 from .verify import VerificationError, verify
@@ -94,20 +94,39 @@ def _cost(args: argparse.Namespace) -> Cost:
     return TimeCost()
 
 
+MAX_SAMPLES = 10_000_000  # rate × te: beyond this a file would take gigabytes
+
+
 def _check_folder(target: str) -> Path:
     folder = Path(target).expanduser()
     if folder.exists() and not folder.is_dir():
         raise ConfigurationError(f"cannot write figures into {target}: it is not a folder")
-    if not folder.exists():
+    if folder.exists():
+        check_writable(folder / "torques.png")
+    else:
         check_writable(folder)  # its parent must exist and be writable
     return folder
 
 
-def _plan_command(args: argparse.Namespace) -> None:
+def _check_request(args: argparse.Namespace) -> None:
+    """What can be checked before loading the robot: numbers and optional packages."""
     if not (np.isfinite(args.rate) and args.rate > 0):
         raise ConfigurationError(f"--rate must be a positive number of Hz, got {args.rate}")
+    if args.lock and not args.urdf:
+        raise ConfigurationError("--lock applies to --urdf (a named robot locks its own joints)")
+    if args.plots:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise ConfigurationError(
+                "--plots needs matplotlib: pip install 'nearopt[viz]'"
+            ) from None
+
+
+def _plan_command(args: argparse.Namespace) -> None:
+    _check_request(args)
     # every output is checked before planning, so that a bad path costs no planning time
-    outputs = {key: check_writable(getattr(args, key)) for key in ("json", "csv", "html")
+    targets = {key: check_writable(getattr(args, key)) for key in ("json", "csv", "html")
                if getattr(args, key)}
     plots = _check_folder(args.plots) if args.plots else None
     robot = (
@@ -115,6 +134,11 @@ def _plan_command(args: argparse.Namespace) -> None:
         if args.robot
         else Robot.from_urdf(args.urdf, locked_joints=tuple(args.lock))
     )
+    if args.weights is not None and len(args.weights) != robot.n:
+        raise ConfigurationError(
+            f"--weights needs one weight per joint of {robot.name} ({robot.n}), "
+            f"got {len(args.weights)}"
+        )
     q0, qe = (np.deg2rad(v) if args.deg else np.asarray(v) for v in (args.q0, args.qe))
     result = plan(
         robot, q0, qe, _cost(args),
@@ -129,27 +153,38 @@ def _plan_command(args: argparse.Namespace) -> None:
     print(f"{result.status}: J = {result.J:.6f} (straight line {result.initial.J:.6f}), "
           f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
           f"{result.wall_time:.2f} s ({result.message})")
+    if args.rate * result.duration > MAX_SAMPLES:
+        raise ConfigurationError(
+            f"--rate {args.rate:g} Hz over te = {result.duration:.4g} s gives more than "
+            f"{MAX_SAMPLES:.0e} samples"
+        )
+    # verified at the controller's rate, and never more coarsely than at 1 kHz
     report = verify(
-        result.trajectory, robot, rate=args.rate, q0=q0, qe=qe, cost=result.cost, J=result.J,
-        velocity_limits=not args.no_velocity_limits,
+        result.trajectory, robot, rate=max(args.rate, 1000.0), q0=q0, qe=qe, cost=result.cost,
+        J=result.J, velocity_limits=not args.no_velocity_limits,
         position_limits=not args.no_position_limits,
     )
     if args.verify:
         print(report)
     report.raise_if_failed()  # nothing is written for a motion that fails
-    if "json" in outputs:
-        print(f"wrote {write_json(result, outputs['json'], args.rate)}")
-    if "csv" in outputs:
-        print(f"wrote {write_csv(result, outputs['csv'], args.rate)}")
-    if "html" in outputs:
-        from .viewer import export_html
+    # everything is produced first, then written: a failure leaves no file behind
+    contents: dict[Path, str | bytes] = {}
+    if "json" in targets:
+        contents[targets["json"]] = json_text(result, args.rate)
+    if "csv" in targets:
+        contents[targets["csv"]] = csv_text(result, args.rate)
+    if "html" in targets:
+        from .viewer import plan_html
 
-        print(f"wrote {export_html(result, outputs['html'])}")
+        contents[targets["html"]] = plan_html(result)
     if plots is not None:
-        from .figures import save_figures
+        from .figures import render_figures
 
-        for written in save_figures(result, plots):
-            print(f"wrote {written}")
+        rendered = render_figures(result)
+        plots.mkdir(exist_ok=True)
+        contents.update({plots / name: png for name, png in rendered.items()})
+    for path in write_all(contents):
+        print(f"wrote {path}")
     if args.show:
         from .viewer import show
 
@@ -176,7 +211,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except NearoptError as exc:
         _fail(str(exc))
     except OSError as exc:
-        _fail(f"{exc.strerror or exc}: {exc.filename or ''}")
+        _fail(f"cannot write {exc.filename or 'an output file'}: {exc.strerror or exc}")
     return 0
 
 

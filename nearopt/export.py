@@ -22,7 +22,16 @@ from .errors import ConfigurationError
 if TYPE_CHECKING:
     from .planner import PlanResult
 
-__all__ = ["check_writable", "write_atomically", "write_json", "write_csv", "KEYS"]
+__all__ = [
+    "check_writable",
+    "write_all",
+    "write_atomically",
+    "json_text",
+    "csv_text",
+    "write_json",
+    "write_csv",
+    "KEYS",
+]
 
 KEYS = ("q", "qd", "qdd", "tau")
 
@@ -40,21 +49,40 @@ def check_writable(target: str | Path) -> Path:
     return path
 
 
-def write_atomically(path: str | Path, text: str) -> Path:
-    """Write ``text`` to ``path`` via a temporary file in the same folder and a rename."""
-    path = check_writable(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+def write_all(contents: dict[Path, str | bytes]) -> list[Path]:
+    """Write several files all or nothing: each to a temporary file in its folder first, then
+    all renamed; if any temporary file cannot be written, none of the files is touched."""
+    staged: list[tuple[str, Path]] = []
+    umask = os.umask(0)
+    os.umask(umask)
     try:
-        with os.fdopen(fd, "w", encoding="utf-8", newline="") as handle:
-            handle.write(text)
-        os.replace(tmp, path)
+        for path, content in contents.items():
+            path = check_writable(path)
+            try:
+                fd, tmp = tempfile.mkstemp(
+                    dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"
+                )
+                staged.append((tmp, path))
+                with os.fdopen(fd, "wb") as handle:
+                    handle.write(content.encode("utf-8") if isinstance(content, str) else content)
+                os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a new file gets the usual mode
+            except OSError as exc:
+                raise ConfigurationError(f"cannot write {path}: {exc.strerror or exc}") from exc
     except BaseException:
-        Path(tmp).unlink(missing_ok=True)
+        for tmp, _ in staged:
+            Path(tmp).unlink(missing_ok=True)
         raise
-    return path
+    for tmp, path in staged:
+        os.replace(tmp, path)
+    return [path for _, path in staged]
 
 
-def write_json(result: PlanResult, path: str | Path, rate: float = 1000.0) -> Path:
+def write_atomically(path: str | Path, content: str | bytes) -> Path:
+    """Write ``content`` (text as UTF-8, or bytes) to ``path`` via a temporary file, renamed."""
+    return write_all({Path(path): content})[0]
+
+
+def json_text(result: PlanResult, rate: float = 1000.0) -> str:
     """The plan as ``{"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
     "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists)."""
     samples = result.trajectory.sample(rate)
@@ -68,10 +96,10 @@ def write_json(result: PlanResult, path: str | Path, rate: float = 1000.0) -> Pa
         **{key: samples[key].tolist() for key in KEYS},
         "history": [{"J": it.J, "alpha": it.alpha} for it in result.history],
     }
-    return write_atomically(path, json.dumps(document))
+    return json.dumps(document)
 
 
-def write_csv(result: PlanResult, path: str | Path, rate: float = 1000.0) -> Path:
+def csv_text(result: PlanResult, rate: float = 1000.0) -> str:
     """The plan's samples as CSV: a header row ``t, q_<joint>…, qd_<joint>…, qdd_…, tau_…``."""
     samples = result.trajectory.sample(rate)
     names = result.robot.joint_names
@@ -81,4 +109,14 @@ def write_csv(result: PlanResult, path: str | Path, rate: float = 1000.0) -> Pat
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(header)
     writer.writerows([repr(float(x)) for x in row] for row in rows)
-    return write_atomically(path, buffer.getvalue())
+    return buffer.getvalue()
+
+
+def write_json(result: PlanResult, path: str | Path, rate: float = 1000.0) -> Path:
+    """Write :func:`json_text` to ``path`` (atomically)."""
+    return write_atomically(path, json_text(result, rate))
+
+
+def write_csv(result: PlanResult, path: str | Path, rate: float = 1000.0) -> Path:
+    """Write :func:`csv_text` to ``path`` (atomically)."""
+    return write_atomically(path, csv_text(result, rate))

@@ -12,10 +12,13 @@ Every function returns the ``matplotlib.figure.Figure`` it drew; its artists car
 
 from __future__ import annotations
 
+import io
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
+
+from .export import write_atomically
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -25,7 +28,7 @@ if TYPE_CHECKING:
     from .robot import Robot
     from .trajectory import Trajectory
 
-__all__ = ["plot_torques", "plot_workspace", "plot_history", "save_figures"]
+__all__ = ["plot_torques", "plot_workspace", "plot_history", "render_figures", "save_figures"]
 
 
 def _pyplot():  # noqa: ANN202 - the module, imported lazily
@@ -167,13 +170,11 @@ def plot_history(result: PlanResult, reference: dict[int, float] | None = None) 
     return fig
 
 
-def save_figures(
-    result: PlanResult, folder: str | Path, reference: dict[int, float] | None = None
-) -> list[Path]:
-    """Write torques.png, workspace.png and history.png for a plan into ``folder``."""
+def render_figures(
+    result: PlanResult, reference: dict[int, float] | None = None
+) -> dict[str, bytes]:
+    """torques.png, workspace.png and history.png of a plan, as PNG bytes by file name."""
     plt = _pyplot()
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
     figures = {
         "torques.png": plot_torques(result.robot, result.trajectory),
         "workspace.png": plot_workspace(
@@ -181,9 +182,22 @@ def save_figures(
         ),
         "history.png": plot_history(result, reference),
     }
-    written = []
+    rendered = {}
     for name, fig in figures.items():
-        fig.savefig(folder / name, dpi=120)
+        buffer = io.BytesIO()
+        fig.savefig(buffer, format="png", dpi=120)
         plt.close(fig)
-        written.append(folder / name)
-    return written
+        rendered[name] = buffer.getvalue()
+    return rendered
+
+
+def save_figures(
+    result: PlanResult, folder: str | Path, reference: dict[int, float] | None = None
+) -> list[Path]:
+    """Write torques.png, workspace.png and history.png for a plan into ``folder``."""
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    return [
+        write_atomically(folder / name, png)
+        for name, png in render_figures(result, reference).items()
+    ]

@@ -32,7 +32,13 @@ from .cost import Cost, TimeCost
 from .errors import ConfigurationError, InfeasiblePathError, SolverError
 from .path import BSplinePath, Path, StraightPath
 from .sensitivity import timing_sensitivity
-from .timing import TimingResult, build_timing_problem, optimal_timing, solve_timing
+from .timing import (
+    MAX_GRID,
+    TimingResult,
+    build_timing_problem,
+    optimal_timing,
+    solve_timing,
+)
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -95,7 +101,8 @@ class PlanResult:
     history
         The accepted iterates, the straight line first.
     status
-        ``"converged"``, ``"iteration_limit"`` or ``"time_limit"``.
+        ``"converged"``, ``"iteration_limit"``, ``"time_limit"`` or ``"stalled"`` (the optimiser
+        found no lower J along its direction before its tolerance; the best iterate is returned).
     method
         ``"quasi-newton"`` or ``"paper"``.
     message
@@ -186,9 +193,15 @@ def plan(
     cost = TimeCost() if cost is None else cost
     if method not in METHODS:
         raise ConfigurationError(f"method must be one of {METHODS}, got {method!r}")
-    for name, value, low in (("max_iterations", max_iterations, 0), ("grid", grid, 2)):
-        if not isinstance(value, int | np.integer) or value < low:
-            raise ConfigurationError(f"{name} must be an integer ≥ {low}, got {value!r}")
+    for name, value, low, high in (
+        ("max_iterations", max_iterations, 0, np.inf),
+        ("grid", grid, 2, MAX_GRID),
+    ):
+        if not isinstance(value, int | np.integer) or not low <= value <= high:
+            raise ConfigurationError(
+                f"{name} must be an integer ≥ {low}" + (f" and ≤ {high}" if high < np.inf else "")
+                + f", got {value!r}"
+            )
     if not isinstance(control_points, int | np.integer) or control_points < 2:
         raise ConfigurationError(f"control_points must be an integer ≥ 2, got {control_points!r}")
     for name, value in (("time_limit", time_limit), ("tolerance", tolerance), ("gamma", gamma)):
@@ -234,7 +247,12 @@ def plan(
             robot, initial, cost, options, position_limits, gamma, max_iterations, time_limit,
             tolerance, t_start, accept,
         )
-    timing = optimal_timing(robot, path, cost, **options) if len(history) > 1 else initial
+    timing = initial
+    if len(history) > 1:
+        try:
+            timing = optimal_timing(robot, path, cost, **options)
+        except (InfeasiblePathError, SolverError) as exc:  # e.g. gravity between two knots
+            path, message = line, f"{message}; the straight line is returned: {exc}"
     if timing.J > initial.J:  # the iterates improved stage 1's grid J, the motion did not
         path, timing = line, initial
         message += "; the straight line is returned: the last iterate's motion costs more"
@@ -364,8 +382,10 @@ def _quasi_newton(
         status, message = state["stop"], f"time limit of {time_limit} s reached"
     elif res.status == 1:
         status, message = "iteration_limit", str(res.message)
-    else:
+    elif res.status == 0:
         status, message = "converged", str(res.message)
+    else:  # e.g. the line search found no lower J along the quasi-Newton direction
+        status, message = "stalled", str(res.message)
     return BSplinePath(controls(state["x"])), status, message, evaluations["count"]
 
 

@@ -22,8 +22,9 @@ The discretised problem (variables b_1 … b_{N−1}; b_0 = b_N = 0):
 For f0 = 1 + Σ w_i u_i² (time, the paper's eq. 32, per-joint weights) and D = 0 this is convex:
 u is affine in b and u²/(√b_k + √b_{k+1}) is convex, so its global optimum is found:
 
-1. Feasibility is decided exactly: some timing exists iff gravity alone is within the limits at
-   every knot (b → 0 gives u → g); otherwise :class:`InfeasiblePathError` says where.
+1. Feasibility is decided exactly: some timing exists iff gravity alone is within the limits
+   along the path (b → 0 gives u → g), checked at the knots and at the points between them that
+   :func:`optimal_timing` checks; otherwise :class:`InfeasiblePathError` says where.
 2. Without damping, the problem is a second-order cone program (see :func:`_socp`; f0 = 1
    included), solved by Clarabel.
 3. With damping, HiGHS (``scipy.optimize.linprog``) first maximises Σ b_k: the greatest feasible
@@ -31,8 +32,8 @@ u is affine in b and u²/(√b_k + √b_{k+1}) is convex, so its global optimum 
    pairwise constraints); for f0 = 1 a second LP checks the KKT conditions at that profile (a
    certificate of optimality), and otherwise the SOCP starts from it.
 4. Any other f0 (:class:`~nearopt.CallableCost`) goes to SciPy's ``trust-constr`` interior-point
-   method from the greatest profile, with the exact gradient and the (tridiagonal) Hessian from
-   differences of that gradient: a local optimum.
+   method from 0.7 times the greatest profile (strictly inside the limits), with the exact
+   gradient and the (tridiagonal) Hessian from differences of that gradient: a local optimum.
 
 Damping makes u depend on λ = √b. It is handled, not dropped: the LPs and the SOCP linearise √b at
 the previous profile until a fixed point (where the linearisation is exact), and ``trust-constr``
@@ -67,6 +68,8 @@ if TYPE_CHECKING:
 
     from .path import Path
     from .robot import Robot
+
+MAX_GRID = 100_000  # segments; stage 1's memory grows linearly beyond any use
 
 __all__ = [
     "TimingProblem",
@@ -157,7 +160,7 @@ class TimingSolution:
     status
         ``"optimal"`` (KKT conditions met to tolerance) or ``"iteration_limit"``.
     solver
-        The method that produced b (``"highs-lp"`` or ``"trust-constr"``).
+        The method that produced b (``"clarabel-socp"``, ``"highs-lp"`` or ``"trust-constr"``).
     iterations
         Iterations of that method.
     message
@@ -224,8 +227,8 @@ def build_timing_problem(
     velocity_limits
         Enforce the robot's joint speed limits |θ̇_i| ≤ v_i.
     """
-    if not isinstance(grid, int | np.integer) or grid < 2:
-        raise ConfigurationError(f"grid must be an integer ≥ 2, got {grid!r}")
+    if not isinstance(grid, int | np.integer) or not 2 <= grid <= MAX_GRID:
+        raise ConfigurationError(f"grid must be an integer ≥ 2 and ≤ {MAX_GRID}, got {grid!r}")
     if path.dof != robot.n:
         raise ConfigurationError(f"the path has {path.dof} joints, {robot.name} has {robot.n}")
     sigma = _grid(grid)
@@ -404,9 +407,19 @@ def _tridiagonal_hessian(
     return 0.5 * (hess + hess.T)
 
 
-def _check_gravity(problem: TimingProblem) -> None:
-    """Raise InfeasiblePathError where gravity alone leaves the torque limits (b → 0 ⇒ u → g)."""
-    g = problem.coef.g
+def _check_gravity(
+    problem: TimingProblem,
+    g: NDArray[np.float64] | None = None,
+    sigma: NDArray[np.float64] | None = None,
+    theta: NDArray[np.float64] | None = None,
+) -> None:
+    """Raise InfeasiblePathError where gravity alone leaves the torque limits (b → 0 ⇒ u → g).
+
+    By default at the problem's knots; ``g``, ``sigma``, ``theta`` give other points of the path
+    (sorted by σ), e.g. those between the knots.
+    """
+    if g is None:
+        g, sigma, theta = problem.coef.g, problem.s, problem.theta
     margin = 1e-9 * (problem.u_upper - problem.u_lower)
     over = g - (problem.u_upper - margin)
     under = (problem.u_lower + margin) - g
@@ -415,15 +428,15 @@ def _check_gravity(problem: TimingProblem) -> None:
         k, i = np.unravel_index(np.argmax(excess), excess.shape)
         side = "upper" if over[k, i] >= under[k, i] else "lower"
         limit = problem.u_upper[i] if side == "upper" else problem.u_lower[i]
-        bad = np.flatnonzero(np.any(excess > 0, axis=1))
+        bad = sigma[np.any(excess > 0, axis=1)]
         raise InfeasiblePathError(
             f"no timing of this path respects the torque limits: gravity alone needs "
             f"u = {g[k, i]:.6g} at joint {problem.joint_names[i]!r}, beyond its {side} limit "
-            f"{limit:.6g} by {excess[k, i]:.6g}, at s/s_e = {problem.s[k]:.6g} "
-            f"(θ = {np.round(problem.theta[k], 6).tolist()}); the path is infeasible for "
-            f"s/s_e ∈ [{problem.s[bad[0]]:.6g}, {problem.s[bad[-1]]:.6g}]",
+            f"{limit:.6g} by {excess[k, i]:.6g}, at s/s_e = {sigma[k]:.6g} "
+            f"(θ = {np.round(theta[k], 6).tolist()}); the path is infeasible for "
+            f"s/s_e ∈ [{bad.min():.6g}, {bad.max():.6g}]",
             joint=problem.joint_names[i],
-            s=float(problem.s[k]),
+            s=float(sigma[k]),
             excess=float(excess[k, i]),
         )
 
@@ -822,10 +835,11 @@ class _Between:
     The limits are imposed at the samples; in between, the torque and the joint speeds along the
     exact path can bulge out by O(Δs²) (or O(√Δs) next to a rest end with damping). They are
     evaluated at ``points`` interior points of every segment, and between neighbouring points
-    (h apart) bounded by max(f(a), f(c)) + h² max|f''| / 8 with h² f'' taken from second
-    differences (the error bound of linear interpolation), so that the check covers the whole
-    segment, not only its points. Next to the rest ends the torque is also evaluated at points
-    geometrically closer to σ = 0 and 1 (at rest b ∝ σ, so a damping torque d√b rises like √σ).
+    (h apart) estimated from above by max(f(a), f(c)) + h² max|f''| / 8 with h² f'' taken from
+    second differences (the error bound of linear interpolation; exact where f'' varies little
+    over 2h), so that the check covers the segment between its points too. Next to the rest ends
+    the torque is also evaluated at points geometrically closer to σ = 0 and 1 (at rest b ∝ σ,
+    so a damping torque d√b rises like √σ).
     """
 
     def __init__(self, robot: Robot, path: Path, problem: TimingProblem, points: int = 8) -> None:
@@ -837,11 +851,15 @@ class _Between:
             [np.repeat(np.arange(big_n), points), np.zeros(8, int), np.full(8, big_n - 1)]
         )
         self.where = np.concatenate([np.tile(frac, big_n), near, 1.0 - near])
-        s = (problem.s[self.seg] + self.where * self.ds[self.seg]) * path.s_end
+        self.sigma = problem.s[self.seg] + self.where * self.ds[self.seg]
+        s = self.sigma * path.s_end
         self.points = points
+        self.theta = path(s, 0)
         self.dtheta = path(s, 1) * path.s_end
-        self.coef = robot.path_coefficients(path(s, 0), self.dtheta, path(s, 2) * path.s_end**2)
+        self.coef = robot.path_coefficients(self.theta, self.dtheta, path(s, 2) * path.s_end**2)
         self.problem = problem
+        order = np.argsort(self.sigma)  # gravity between the knots too
+        _check_gravity(problem, self.coef.g[order], self.sigma[order], self.theta[order])
 
     def _along(
         self, first: NDArray[np.float64], inner: NDArray[np.float64], last: NDArray[np.float64]
@@ -998,6 +1016,7 @@ def optimal_timing(
     t0 = time.perf_counter()
     cost = TimeCost() if cost is None else cost
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
+    _check_gravity(problem)
     between = _Between(robot, path, problem)
     velocity = robot.limits.velocity if velocity_limits else None
     sol = solve_timing(problem, cost, tolerance=tolerance)

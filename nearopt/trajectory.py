@@ -112,10 +112,14 @@ class Trajectory:
         Raises
         ------
         ConfigurationError
-            If the rate is not a positive number.
+            If the rate is not a positive number or would give more than 1e8 samples.
         """
         if not (np.isfinite(rate) and rate > 0):
             raise ConfigurationError(f"the sampling rate must be > 0 Hz, got {rate}")
+        if self.duration * rate > 1e8:
+            raise ConfigurationError(
+                f"{rate:g} Hz over {self.duration:.4g} s would be more than 1e8 samples"
+            )
         count = int(np.floor(self.duration * rate + 1e-9)) + 1
         t = np.arange(count) / rate
         if t[-1] < self.duration:

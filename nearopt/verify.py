@@ -110,8 +110,10 @@ class VerificationReport:
 
 
 def _excess(values: NDArray, lower: NDArray, upper: NDArray, scale: NDArray) -> NDArray:
+    """(value beyond the nearer limit) / scale; −inf for joints without that limit."""
     with np.errstate(invalid="ignore"):
-        return np.maximum(values - upper, lower - values) / scale
+        excess = np.maximum(values - upper, lower - values) / scale
+    return np.where(np.isnan(excess), -np.inf, excess)
 
 
 def _where(t: NDArray, joints: list[str], index: tuple[int, int]) -> str:

@@ -17,9 +17,12 @@ Two ways to look at it:
 
 from __future__ import annotations
 
+import atexit
 import base64
+import queue
 import subprocess
 import sys
+import threading
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -32,7 +35,8 @@ from meshcat.animation import Animation
 from meshcat.servers.tree import SceneTree, find_node, walk
 from pinocchio.visualize import MeshcatVisualizer
 
-from .errors import ConfigurationError
+from .errors import ConfigurationError, NearoptError
+from .export import write_atomically
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -41,7 +45,7 @@ if TYPE_CHECKING:
     from .robot import Robot
     from .trajectory import Trajectory
 
-__all__ = ["export_html", "show", "LiveViewer", "scene_html"]
+__all__ = ["export_html", "show", "LiveViewer", "scene_html", "plan_html"]
 
 _VIEWER_JS = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
 
@@ -205,14 +209,19 @@ def export_html(result: PlanResult, path: str | Path, fps: float = 60.0) -> Path
     Path
         The file written.
     """
-    target = Path(path)
-    html = scene_html(result.robot, result.trajectory, result.initial.trajectory, fps)
-    target.write_text(html, encoding="utf-8")
-    return target
+    return write_atomically(path, plan_html(result, fps))
+
+
+def plan_html(result: PlanResult, fps: float = 60.0) -> str:
+    """:func:`scene_html` of a plan, with the straight line's tip trail."""
+    return scene_html(result.robot, result.trajectory, result.initial.trajectory, fps)
 
 
 class LiveViewer:
     """A meshcat server on 127.0.0.1 showing a plan; close it (or use ``with``) when done.
+
+    The server runs in a child process that exits when this one closes it, exits, or dies (it
+    watches its stdin, a pipe from here).
 
     Attributes
     ----------
@@ -222,26 +231,48 @@ class LiveViewer:
         The ``meshcat.Visualizer`` connected to the server, to add more to the scene.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, timeout: float = 30.0) -> None:
+        # -P: do not put the working folder first on the child's path (it must import this nearopt)
         self._process = subprocess.Popen(
-            [sys.executable, "-u", "-m", "nearopt._meshcat_server"],
+            [sys.executable, "-P", "-u", "-m", "nearopt._meshcat_server"],
+            stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
-            stderr=subprocess.PIPE,
+            stderr=subprocess.DEVNULL,
             text=True,
         )
-        lines = [self._process.stdout.readline().strip() for _ in range(2)]
-        if not all("=" in line for line in lines):
+        lines: queue.Queue[str] = queue.Queue()
+        threading.Thread(
+            target=lambda: [lines.put(self._process.stdout.readline().strip()) for _ in range(2)],
+            daemon=True,
+        ).start()
+        try:
+            urls = dict(lines.get(timeout=timeout).split("=", 1) for _ in range(2))
+            self.zmq_url, self.url = urls["zmq_url"], urls["web_url"]
+        except (queue.Empty, ValueError, KeyError):
             self.close()
-            raise RuntimeError(f"the meshcat server did not start: {lines}")
-        urls = dict(line.split("=", 1) for line in lines)
-        self.zmq_url, self.url = urls["zmq_url"], urls["web_url"]
+            raise NearoptError(
+                f"the meshcat server did not start within {timeout:g} s "
+                f"(exit code {self._process.poll()})"
+            ) from None
+        atexit.register(self.close)
         self.visualizer = meshcat.Visualizer(zmq_url=self.zmq_url)
 
     def close(self) -> None:
-        """Stop the server."""
+        """Stop the server and release its pipes and socket."""
+        visualizer = getattr(self, "visualizer", None)
+        if visualizer is not None:
+            visualizer.window.zmq_socket.close(linger=0)
+            self.visualizer = None
         if self._process.poll() is None:
-            self._process.terminate()
-            self._process.wait(timeout=10)
+            self._process.stdin.close()  # the server exits at the end of its stdin
+            try:
+                self._process.wait(timeout=5)
+            except subprocess.TimeoutExpired:
+                self._process.kill()
+                self._process.wait()
+        for pipe in (self._process.stdin, self._process.stdout):
+            pipe.close()
+        atexit.unregister(self.close)
 
     def __enter__(self) -> LiveViewer:
         return self

@@ -199,3 +199,13 @@ def test_no_limit_is_silently_dropped_with_damping() -> None:
 
 def test_robot_names_cover_six_arms() -> None:
     assert len(ROBOT_NAMES) >= 6
+
+
+def test_gravity_beyond_a_limit_between_knots_is_infeasible_too() -> None:
+    """On a coarse grid gravity may peak between knots (θ1 = π/2 lies between two of them)."""
+    robot = load("two_link").with_limits(effort=[3.92, 5.0])  # |g1| ≤ 3.924 = 4 m g l
+    path = StraightPath([0.3, 0.0], [2.9, 0.0])
+    with pytest.raises(nearopt.InfeasiblePathError) as info:
+        optimal_timing(robot, path, grid=21)
+    assert info.value.joint == "joint1"
+    assert abs(path(info.value.s)[0][0] - np.pi / 2) < 0.1

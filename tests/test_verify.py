@@ -63,3 +63,12 @@ def test_forward_simulation_catches_a_model_mismatch(plan: nearopt.PlanResult) -
 def test_rate_must_be_positive(plan: nearopt.PlanResult) -> None:
     with pytest.raises(nearopt.ConfigurationError, match="rate"):
         verify(plan.trajectory, plan.robot, rate=0.0)
+
+
+def test_joints_without_a_speed_or_position_limit_are_not_failures(
+    plan: nearopt.PlanResult,
+) -> None:
+    free = plan.robot.with_limits(velocity=[np.inf, 100.0],
+                                  position=([-np.inf, -7.0], [np.inf, 7.0]))
+    report = verify(plan.trajectory, free)
+    assert report.passed, str(report)

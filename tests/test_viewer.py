@@ -114,3 +114,34 @@ def test_live_server_listens_on_loopback_only(plans: dict[str, nearopt.PlanResul
             conn.sendall(b"GET /static/ HTTP/1.0\r\n\r\n")
             assert conn.recv(12).startswith(b"HTTP/1.")
     assert _listening(web_port) == []  # closed
+
+
+def test_live_server_stops_when_its_parent_dies(tmp_path: Path) -> None:
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    script = tmp_path / "parent.py"
+    script.write_text(
+        "import numpy as np, nearopt, sys, time\n"
+        "from nearopt.viewer import show\n"
+        "r = nearopt.Robot.from_name('two_link')\n"
+        "res = nearopt.plan(r, [0.5, 0.2], [1.0, 1.0], grid=20, max_iterations=1)\n"
+        "viewer = show(res)\n"
+        "print(viewer.url, flush=True)\n"
+        "time.sleep(60)\n"
+    )
+    parent = subprocess.Popen([sys.executable, str(script)], stdout=subprocess.PIPE, text=True)
+    url = ""
+    while "http" not in url:
+        url = parent.stdout.readline()
+    port = int(url.split(":")[2].split("/")[0])
+    assert _listening(port) == ["127.0.0.1"]
+    parent.send_signal(signal.SIGKILL)
+    parent.wait()
+    for _ in range(50):
+        if not _listening(port):
+            break
+        time.sleep(0.1)
+    assert _listening(port) == []
