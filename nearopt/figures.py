@@ -28,7 +28,15 @@ if TYPE_CHECKING:
     from .robot import Robot
     from .trajectory import Trajectory
 
-__all__ = ["plot_torques", "plot_workspace", "plot_history", "render_figures", "save_figures"]
+__all__ = [
+    "plot_torques",
+    "plot_workspace",
+    "plot_history",
+    "render_figures",
+    "save_figures",
+    "plane_axes",
+    "tip_path",
+]
 
 
 def _pyplot():  # noqa: ANN202 - the module, imported lazily
@@ -73,7 +81,7 @@ def _chain(robot: Robot, q: NDArray[np.float64]) -> NDArray[np.float64]:
     return np.array([*points, robot.frame_position(q)])
 
 
-def _plane(points: NDArray[np.float64]) -> NDArray[np.float64] | None:
+def plane_axes(points: NDArray[np.float64]) -> NDArray[np.float64] | None:
     """Screen axes (right, up) of the points' plane seen from its −y side, or None if not planar.
 
     "Up" is world z projected into the plane (when the plane is not horizontal), as in the
@@ -104,13 +112,13 @@ def plot_workspace(
         Link poses drawn per motion, evenly spaced in time.
     """
     plt = _pyplot()
-    tips = {label: _tip(robot, traj) for label, traj in motions.items()}
+    tips = {label: tip_path(robot, traj) for label, traj in motions.items()}
     frames = {
         label: [_chain(robot, q) for q in traj(np.linspace(0, traj.duration, poses), 0)]
         for label, traj in motions.items()
     }
     everything = np.vstack([*tips.values(), *(c for f in frames.values() for c in f)])
-    plane = _plane(everything)
+    plane = plane_axes(everything)
     fig = plt.figure(figsize=(5 * len(motions), 5))
     for k, label in enumerate(motions):
         if plane is not None:
@@ -140,7 +148,7 @@ def plot_workspace(
     return fig
 
 
-def _tip(robot: Robot, trajectory: Trajectory, points: int = 300) -> NDArray[np.float64]:
+def tip_path(robot: Robot, trajectory: Trajectory, points: int = 300) -> NDArray[np.float64]:
     return robot.frame_position(trajectory(np.linspace(0, trajectory.duration, points), 0))
 
 

@@ -39,6 +39,7 @@ from .timing import (
     optimal_timing,
     solve_timing,
 )
+from .trajectory import segment_times
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -337,7 +338,8 @@ def _quasi_newton(
             return 2.0 * evaluations["worst"], np.zeros_like(x)
         sens = timing_sensitivity(robot, problem, sol.b, cost)
         grad = sens.gradient(basis, problem.s)
-        last.update(x=x.copy(), J=sol.objective, duration=_duration(problem.s, sol.b))
+        duration = float(np.sum(segment_times(problem.s, sol.b)))
+        last.update(x=x.copy(), J=sol.objective, duration=duration)
         if not np.isfinite(evaluations["worst"]):
             evaluations["worst"] = sol.objective
         evaluations["worst"] = max(evaluations["worst"], sol.objective)
@@ -388,7 +390,3 @@ def _quasi_newton(
         status, message = "stalled", str(res.message)
     return BSplinePath(controls(state["x"])), status, message, evaluations["count"]
 
-
-def _duration(sigma: NDArray[np.float64], b: NDArray[np.float64]) -> float:
-    lam = np.sqrt(b)
-    return float(np.sum(2.0 * np.diff(sigma) / (lam[:-1] + lam[1:])))

@@ -159,26 +159,17 @@ def timing_sensitivity(
     np.add.at(d0, node, g0)
     np.add.at(d1, node, g1)
     np.add.at(d2, node, g2)
-    # speed bounds b̄_k = min_i v_i² / θ'_i²: ∂(b_k − b̄_k)/∂θ'_i = 2 v_i² / θ'_i³ for the binding i
+    # speed bounds b̄ = min_i v_i² / θ'_i² at the knots and at interior points
+    v = robot.limits.velocity
     if speed.size:
-        v = robot.limits.velocity
         knots = speed + 1
-        with np.errstate(divide="ignore"):
-            ratio = np.where(p.dtheta[knots] != 0, v**2 / p.dtheta[knots] ** 2, np.inf)
-        joint = np.argmin(ratio, axis=1)
-        d1[knots, joint] += nu * 2.0 * v[joint] ** 2 / p.dtheta[knots, joint] ** 3
-    # interior speed rows: bound_p = min_i v_i² / θ'_i(σ_p)²
+        rows, joint, value = _speed_bound_gradient(p.dtheta[knots], v, nu)
+        d1[knots[rows], joint] += value
     interior = p.interior_speed
     d_inside = np.zeros((0, n)) if interior is None else np.zeros_like(interior.dtheta)
     if inside.size:
-        v = robot.limits.velocity
-        slope = interior.dtheta[inside]
-        with np.errstate(divide="ignore"):
-            ratio = np.where(slope != 0, v**2 / slope**2, np.inf)
-        joint = np.argmin(ratio, axis=1)
-        d_inside[inside, joint] = (
-            nu_inside * 2.0 * v[joint] ** 2 / slope[np.arange(inside.size), joint] ** 3
-        )
+        rows, joint, value = _speed_bound_gradient(interior.dtheta[inside], v, nu_inside)
+        d_inside[inside[rows], joint] = value
     return PathSensitivity(
         value=value,
         theta=d0,
@@ -188,3 +179,17 @@ def timing_sensitivity(
         interior_dtheta=d_inside,
         residual=float(rnorm / max(np.linalg.norm(grad), 1e-300)),
     )
+
+
+def _speed_bound_gradient(
+    dtheta: NDArray[np.float64], velocity: NDArray[np.float64], nu: NDArray[np.float64]
+) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
+    """∂/∂θ' of Σ ν (b − b̄) with b̄ = min_i v_i² / θ'_i²: 2 ν v_i² / θ'_i³ for the binding joint i.
+
+    Returns the rows, their binding joints and the values.
+    """
+    with np.errstate(divide="ignore"):
+        ratio = np.where(dtheta != 0, velocity**2 / dtheta**2, np.inf)
+    rows = np.arange(dtheta.shape[0])
+    joint = np.argmin(ratio, axis=1)
+    return rows, joint, nu * 2.0 * velocity[joint] ** 2 / dtheta[rows, joint] ** 3

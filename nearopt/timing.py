@@ -61,7 +61,7 @@ from scipy.optimize import Bounds, LinearConstraint, NonlinearConstraint, linpro
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, InfeasiblePathError, SolverError
 from .robot import PathCoefficients
-from .trajectory import Trajectory
+from .trajectory import Trajectory, segment_times
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -350,8 +350,7 @@ class _Discretisation:
         return sp.vstack([j] * self.problem.dof).tocsr()
 
     def segment_times(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
-        lam = np.sqrt(self.b(z))
-        return 2.0 * self.ds / (lam[:-1] + lam[1:])
+        return segment_times(self.problem.s, self.b(z))
 
     def objective(self, z: NDArray[np.float64], cost: Cost) -> tuple[float, NDArray[np.float64]]:
         """The discretised J and its gradient with respect to z."""
@@ -359,7 +358,7 @@ class _Discretisation:
         n, big_n = p.dof, p.segments
         b = self.b(z)
         lam = np.sqrt(b)
-        dt = 2.0 * self.ds / (lam[:-1] + lam[1:])
+        dt = segment_times(p.s, b)
         u = self.torque(z).reshape(n, 2 * big_n).T
         q = p.theta[self.node]
         qd = p.dtheta[self.node] * lam[self.node, None]
@@ -948,10 +947,7 @@ class _Between:
 
     def speed_scale(self, b: NDArray[np.float64], velocity: NDArray[np.float64]) -> float:
         """The largest α ≤ 1 such that αb keeps every joint speed within its limit (θ̇² ∝ α)."""
-        with np.errstate(divide="ignore", invalid="ignore"):
-            ratio = velocity**2 / self._speed_squared(b)
-        return float(min(1.0, np.nanmin(np.where(ratio > 0, ratio, np.inf))))
-
+        return float(min(1.0, np.min(self.speed_excess(b, velocity))))
 
 def _uniform_slow_down(
     between: _Between, b: NDArray[np.float64], velocity: NDArray[np.float64] | None
@@ -1031,10 +1027,9 @@ def optimal_timing(
     t0 = time.perf_counter()
     cost = TimeCost() if cost is None else cost
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
-    _check_gravity(problem)
-    between = _Between(robot, path, problem)
+    sol = solve_timing(problem, cost, tolerance=tolerance)  # gravity checked at the knots
+    between = _Between(robot, path, problem)  # and between them
     velocity = robot.limits.velocity if velocity_limits else None
-    sol = solve_timing(problem, cost, tolerance=tolerance)
     for _ in range(4):
         # where the motion leaves a limit between samples: a uniform slow-down by α if that
         # costs less than 1e-5 of b (below the grid's own error), otherwise tighten and re-solve

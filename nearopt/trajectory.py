@@ -24,10 +24,16 @@ if TYPE_CHECKING:
 
     from .path import Path
 
-__all__ = ["Trajectory"]
+__all__ = ["Trajectory", "segment_times"]
 
 InverseDynamics = Callable[["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"],
                            "NDArray[np.float64]"]
+
+
+def segment_times(s: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
+    """Δt_k = 2 Δs_k / (λ_k + λ_{k+1}), exact for b = λ² linear in s on each segment, (N,)."""
+    lam = np.sqrt(np.asarray(b, dtype=float))
+    return 2.0 * np.diff(np.asarray(s, dtype=float)) / (lam[:-1] + lam[1:])
 
 
 class Trajectory:
@@ -63,8 +69,7 @@ class Trajectory:
         self.b = b
         self.lam = np.sqrt(b)
         self.a = np.diff(b) / (2.0 * np.diff(s))
-        dt = 2.0 * np.diff(s) / (self.lam[:-1] + self.lam[1:])
-        self.t = np.concatenate([[0.0], np.cumsum(dt)])
+        self.t = np.concatenate([[0.0], np.cumsum(segment_times(s, b))])
         self._inverse_dynamics = inverse_dynamics
         for arr in (self.s, self.b, self.lam, self.a, self.t):
             arr.setflags(write=False)

@@ -37,6 +37,7 @@ from pinocchio.visualize import MeshcatVisualizer
 
 from .errors import ConfigurationError, NearoptError
 from .export import write_atomically
+from .figures import plane_axes, tip_path
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -141,9 +142,9 @@ def _draw(
             frame[path].set_transform(placement.homogeneous)
     viz.display(q[0])
     _aim_camera(vis, robot, q)
-    _trail(vis, "planned", _tip_path(robot, trajectory), 0xD62728)
+    _trail(vis, "planned", tip_path(robot, trajectory), 0xD62728)
     if initial is not None:
-        _trail(vis, "initial", _tip_path(robot, initial), 0x888888)
+        _trail(vis, "initial", tip_path(robot, initial), 0x888888)
     vis.set_animation(animation, play=True, repetitions=1)
 
 
@@ -157,10 +158,9 @@ def _aim_camera(vis: meshcat.Visualizer, robot: Robot, q: NDArray[np.float64]) -
         ]
     )
     reach = max(float(np.max(np.linalg.norm(points, axis=1))), 0.2)
-    centred = points - points.mean(axis=0)
-    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
-    if sv[-1] < 1e-6 * max(sv[0], 1e-12):  # planar: look along the normal, from −y
-        direction = vt[-1] if vt[-1] @ [0.0, -1.0, 0.0] >= 0 else -vt[-1]
+    axes = plane_axes(points)
+    if axes is not None:  # planar: look along the normal (right × up), from the −y side
+        direction = np.cross(axes[0], axes[1])
     else:
         direction = np.array([1.2, -1.0, 0.6]) / np.linalg.norm([1.2, -1.0, 0.6])
     eye = 2.2 * reach * direction
@@ -168,11 +168,6 @@ def _aim_camera(vis: meshcat.Visualizer, robot: Robot, q: NDArray[np.float64]) -
     vis["/Cameras/default/rotated/<object>"].set_property(
         "position", [float(eye[0]), float(eye[2]), float(-eye[1])]
     )
-
-
-def _tip_path(robot: Robot, trajectory: Trajectory, points: int = 200) -> NDArray[np.float64]:
-    t = np.linspace(0.0, trajectory.duration, points)
-    return robot.frame_position(trajectory(t, 0))
 
 
 def _trail(vis: meshcat.Visualizer, name: str, points: NDArray[np.float64], color: int) -> None:
