@@ -23,7 +23,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.optimize import nnls
 
-from .timing import TimingProblem, _Discretisation
+from .timing import Discretisation, TimingProblem
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -101,7 +101,7 @@ def timing_sensitivity(
         A torque sample within this fraction of its limit range from a limit (or a speed bound
         within this fraction of itself) counts as active; inactive ones get μ = 0 from the fit.
     """
-    disc = _Discretisation(problem)
+    disc = Discretisation(problem)
     p = problem
     n, big_n = p.dof, p.segments
     z = np.asarray(b, dtype=float)[1:-1]

@@ -1,0 +1,122 @@
+"""Stage 1 end to end: sample the path, solve, keep the limits between samples, return a motion."""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..cost import Cost, TimeCost
+from ..trajectory import Trajectory
+from .between import BetweenSamples, tighten, uniform_slow_down
+from .problem import build_timing_problem
+from .solvers import solve_timing
+
+if TYPE_CHECKING:
+    from ..path import Path
+    from ..robot import Robot
+
+__all__ = ["TimingResult", "optimal_timing"]
+
+
+@dataclass(frozen=True)
+class TimingResult:
+    """The optimal timing of a path: a trajectory and its cost.
+
+    Attributes
+    ----------
+    trajectory
+        θ(t), θ̇(t), θ̈(t), u(t) for t ∈ [0, duration].
+    J
+        ∫ f0 dt of the returned motion [s·(unit of f0)], by Gauss-Legendre quadrature per segment.
+    duration
+        t_e [s].
+    objective
+        The discretised cost the solver minimised (differs from J by the discretisation, O(Δs²)).
+    status, solver, iterations, message
+        As in :class:`TimingSolution`.
+    wall_time
+        Time spent [s], building the problem included.
+    """
+
+    trajectory: Trajectory
+    J: float
+    duration: float
+    objective: float
+    status: str
+    solver: str
+    iterations: int
+    message: str
+    wall_time: float
+
+
+def optimal_timing(
+    robot: Robot,
+    path: Path,
+    cost: Cost | None = None,
+    *,
+    grid: int = 200,
+    velocity_limits: bool = True,
+    tolerance: float = 1e-9,
+) -> TimingResult:
+    """Stage 1: the timing λ(s) of a path that minimises J = ∫ f0 dt under the robot's limits.
+
+    Parameters
+    ----------
+    robot
+        The arm; its effort limits (and, if ``velocity_limits``, speed limits) are enforced.
+    path
+        The spatial path θ(s).
+    cost
+        The running cost f0; default :class:`~nearopt.TimeCost` (time-optimal).
+    grid
+        N, the number of grid segments.
+    velocity_limits
+        Enforce |θ̇_i| ≤ v_i (the URDF's velocity limits unless overridden).
+    tolerance
+        Optimality tolerance of the NLP.
+
+    Returns
+    -------
+    TimingResult
+        The trajectory, J (integrated over the returned motion) and the solver's report.
+
+    Raises
+    ------
+    InfeasiblePathError
+        If gravity alone exceeds a torque limit somewhere on the path (names joint, s, θ, excess).
+    """
+    t0 = time.perf_counter()
+    cost = TimeCost() if cost is None else cost
+    problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
+    sol = solve_timing(problem, cost, tolerance=tolerance)  # gravity checked at the knots
+    between = BetweenSamples(robot, path, problem)  # and between them
+    velocity = robot.limits.velocity if velocity_limits else None
+    for _ in range(4):
+        # where the motion leaves a limit between samples: a uniform slow-down by α if that
+        # costs less than 1e-5 of b (below the grid's own error), otherwise tighten and re-solve
+        b = uniform_slow_down(between, sol.b, velocity)
+        if np.all(b >= (1.0 - 1e-5) * sol.b):
+            break
+        tighter = tighten(problem, between, sol.b, velocity)
+        if tighter is None:
+            break
+        problem = tighter
+        sol = solve_timing(problem, cost, tolerance=tolerance)
+    else:
+        b = uniform_slow_down(between, sol.b, velocity)
+    # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
+    traj = Trajectory(path, problem.s * path.s_end, b * path.s_end**2, robot.inverse_dynamics_batch)
+    return TimingResult(
+        trajectory=traj,
+        J=traj.integrate(cost),
+        duration=traj.duration,
+        objective=sol.objective,
+        status=sol.status,
+        solver=sol.solver,
+        iterations=sol.iterations,
+        message=sol.message,
+        wall_time=time.perf_counter() - t0,
+    )
