@@ -92,8 +92,8 @@ def json_text(result: PlanResult, rate: float = 1000.0) -> str:
         "cost": result.cost.describe(),
         "J": result.J,
         "duration": result.duration,
-        "t": samples["t"].tolist(),
-        **{key: samples[key].tolist() for key in KEYS},
+        "t": samples.t.tolist(),
+        **{key: getattr(samples, key).tolist() for key in KEYS},
         "history": [{"J": it.J, "alpha": it.alpha} for it in result.history],
     }
     return json.dumps(document)
@@ -104,7 +104,7 @@ def csv_text(result: PlanResult, rate: float = 1000.0) -> str:
     samples = result.trajectory.sample(rate)
     names = result.robot.joint_names
     header = ["t"] + [f"{key}_{name}" for key in KEYS for name in names]
-    rows = np.column_stack([samples["t"], *(samples[key] for key in KEYS)])
+    rows = np.column_stack([samples.t, *(getattr(samples, key) for key in KEYS)])
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow(header)

@@ -63,7 +63,7 @@ def plot_torques(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> 
     n = robot.n
     fig, axes = plt.subplots(n, 1, sharex=True, figsize=(7, 1.8 * n + 0.6), squeeze=False)
     for i, ax in enumerate(axes[:, 0]):
-        ax.plot(samples["t"], samples["tau"][:, i], color="C0", label=f"u{i + 1}")
+        ax.plot(samples.t, samples.tau[:, i], color="C0", label=f"u{i + 1}")
         for limit in (robot.limits.effort_lower[i], robot.limits.effort_upper[i]):
             ax.axhline(limit, color="0.4", linestyle="--", linewidth=1)
         ax.set_ylabel(f"u{i + 1} [N·m]\n{robot.joint_names[i]}", fontsize=8)

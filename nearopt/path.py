@@ -34,6 +34,13 @@ class Path(Protocol):
     def dof(self) -> int:
         """Number of joints n."""
 
+    @property
+    def breakpoints(self) -> NDArray[np.float64]:
+        """Interior s where the path is not smooth (a spline's knots, where θ'' has a kink or a
+        jump) [unit of s], shape (B,); empty for a smooth path. Stage 1 puts a grid knot on each,
+        so that the torque is smooth inside every segment. Optional: a path without this
+        attribute is taken as smooth."""
+
     def __call__(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
         """θ(s) (order 0), θ'(s) (1) or θ''(s) (2) at the given s, shape (len(s), n)."""
 
@@ -77,6 +84,10 @@ class StraightPath:
     @property
     def dof(self) -> int:
         return self.theta0.size
+
+    @property
+    def breakpoints(self) -> NDArray[np.float64]:
+        return np.zeros(0)
 
     def __call__(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
         s = np.atleast_1d(np.asarray(s, dtype=float))[:, None]
@@ -122,6 +133,8 @@ class SplinePath:
             bc = ((1, np.asarray(dtheta_ends[0], float)), (1, np.asarray(dtheta_ends[1], float)))
         self._spline = CubicSpline(s, theta, axis=0, bc_type=bc)
         self._s_end = float(s[-1])
+        self._breaks = s[1:-1].copy()
+        self._breaks.setflags(write=False)
 
     @property
     def s_end(self) -> float:
@@ -130,6 +143,10 @@ class SplinePath:
     @property
     def dof(self) -> int:
         return int(self._spline.c.shape[-1])
+
+    @property
+    def breakpoints(self) -> NDArray[np.float64]:
+        return self._breaks
 
     def __call__(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
         s = np.atleast_1d(np.asarray(s, dtype=float))
@@ -194,6 +211,10 @@ class BSplinePath:
     @property
     def dof(self) -> int:
         return self.control_points.shape[1]
+
+    @property
+    def breakpoints(self) -> NDArray[np.float64]:
+        return np.unique(self.knots[(self.knots > 0.0) & (self.knots < 1.0)])
 
     def __call__(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
         s = np.atleast_1d(np.asarray(s, dtype=float))

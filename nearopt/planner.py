@@ -337,8 +337,8 @@ def _quasi_newton(
             # every feasible one makes the line search step back; the gradient is not used there
             return 2.0 * evaluations["worst"], np.zeros_like(x)
         sens = timing_sensitivity(robot, problem, sol.b, cost)
-        grad = sens.gradient(basis, problem.s)
-        duration = float(np.sum(segment_times(problem.s, sol.b)))
+        grad = sens.gradient(basis, problem.sigma)
+        duration = float(np.sum(segment_times(problem.sigma, sol.b)))
         last.update(x=x.copy(), J=sol.objective, duration=duration)
         if not np.isfinite(evaluations["worst"]):
             evaluations["worst"] = sol.objective

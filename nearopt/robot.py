@@ -66,6 +66,9 @@ class JointLimits:
         Joint speed limits |θ̇_i| ≤ velocity_i [rad/s or m/s]; inf where none is declared.
     effort_lower, effort_upper
         Actuator limits u_min ≤ u ≤ u_max of eq. (2) [N·m or N].
+    acceleration
+        Joint acceleration limits |θ̈_i| ≤ acceleration_i [rad/s² or m/s²]; inf where none (URDF
+        has no acceleration limits: they are set with :meth:`Robot.with_limits`).
     """
 
     position_lower: NDArray[np.float64]
@@ -73,6 +76,7 @@ class JointLimits:
     velocity: NDArray[np.float64]
     effort_lower: NDArray[np.float64]
     effort_upper: NDArray[np.float64]
+    acceleration: NDArray[np.float64]
 
 
 class PathCoefficients(NamedTuple):
@@ -221,6 +225,7 @@ class Robot:
         velocity_limit: ArrayLike | None = None,
         position_limits: tuple[ArrayLike, ArrayLike] | None = None,
         damping: ArrayLike | None = None,
+        acceleration_limit: ArrayLike | None = None,
     ) -> Robot:
         """Load an arm from a URDF file.
 
@@ -235,7 +240,7 @@ class Robot:
             The end-effector frame; by default the last body frame on the last joint.
         name
             Name of the robot; by default the URDF's ``<robot name>``.
-        effort_limit, velocity_limit, position_limits, damping
+        effort_limit, velocity_limit, position_limits, damping, acceleration_limit
             Overrides of the URDF's values; see :meth:`with_limits`. ``damping`` [N·m·s/rad], (n,).
 
         Raises
@@ -292,6 +297,7 @@ class Robot:
                 _readonly(velocity),
                 _readonly(effort_lower),
                 _readonly(effort_upper),
+                _readonly(np.full(n, np.inf)),
             ),
             damping=np.array(model.damping, dtype=float),
             name=name or robot_name,
@@ -301,12 +307,14 @@ class Robot:
             locked_joints=locked,
         )
         robot._check_inertia()
-        if any(x is not None for x in (effort_limit, velocity_limit, position_limits, damping)):
+        overrides = (effort_limit, velocity_limit, position_limits, damping, acceleration_limit)
+        if any(x is not None for x in overrides):
             robot = robot.with_limits(
                 effort=effort_limit,
                 velocity=velocity_limit,
                 position=position_limits,
                 damping=damping,
+                acceleration=acceleration_limit,
             )
         return robot
 
@@ -339,6 +347,7 @@ class Robot:
         velocity: ArrayLike | None = None,
         position: tuple[ArrayLike, ArrayLike] | None = None,
         damping: ArrayLike | None = None,
+        acceleration: ArrayLike | None = None,
     ) -> Robot:
         """A copy of this robot with some limits (or the damping) replaced.
 
@@ -353,6 +362,9 @@ class Robot:
             A pair (lower, upper) of (n,) arrays [rad or m]; ``±np.inf`` removes them.
         damping
             Viscous damping d_i [N·m·s/rad or N·s/m], scalar or (n,).
+        acceleration
+            Joint acceleration limits |θ̈_i| ≤ a_i [rad/s² or m/s²], scalar or (n,); ``np.inf``
+            removes them (the default: URDFs declare none).
 
         Raises
         ------
@@ -378,6 +390,10 @@ class Robot:
             p_lo = self._joint_array(position[0], "lower position limit", allow_inf=True)
             p_hi = self._joint_array(position[1], "upper position limit", allow_inf=True)
             self._check_order(p_lo, p_hi, "position", strict=False)
+        acc = lim.acceleration
+        if acceleration is not None:
+            acc = self._joint_array(acceleration, "acceleration limit", allow_inf=True)
+            self._check_positive(acc, "acceleration limit")
         damp = self.damping
         if damping is not None:
             damp = self._joint_array(damping, "damping")
@@ -390,7 +406,12 @@ class Robot:
         return Robot(
             self._model,
             limits=JointLimits(
-                _readonly(p_lo), _readonly(p_hi), _readonly(vel), _readonly(e_lo), _readonly(e_hi)
+                _readonly(p_lo),
+                _readonly(p_hi),
+                _readonly(vel),
+                _readonly(e_lo),
+                _readonly(e_hi),
+                _readonly(acc),
             ),
             damping=damp,
             name=self.name,
@@ -431,14 +452,14 @@ class Robot:
             f"{self.name}: {self.n} joints, tip frame {self.tip!r}, "
             f"gravity {np.round(self.gravity, 4).tolist()} m/s²",
             f"{'joint':<28}{'position [lo, hi]':>24}{'|velocity|':>12}"
-            f"{'effort [lo, hi]':>22}{'damping':>10}",
+            f"{'effort [lo, hi]':>22}{'damping':>10}{'|accel.|':>10}",
         ]
         for i, jn in enumerate(self.joint_names):
             rows.append(
                 f"{jn:<28}{f'[{lim.position_lower[i]:.4g}, {lim.position_upper[i]:.4g}]':>24}"
                 f"{lim.velocity[i]:>12.4g}"
                 f"{f'[{lim.effort_lower[i]:.4g}, {lim.effort_upper[i]:.4g}]':>22}"
-                f"{self.damping[i]:>10.4g}"
+                f"{self.damping[i]:>10.4g}{lim.acceleration[i]:>10.4g}"
             )
         return "\n".join(rows)
 

@@ -1,17 +1,20 @@
 """How stage 1's optimum J*(θ) changes with the path: the gradient that drives path optimisation.
 
-Stage 1 solves, on a grid σ_0 … σ_N, ``min_b Obj(b; θ)`` subject to the torque limits
-``u_min ≤ u_r(b; θ) ≤ u_max`` at the samples r and the speed bounds ``b_k ≤ b̄_k(θ')``. Its optimal
-value J*(θ) depends on the path only through the samples θ(σ_k), θ'(σ_k), θ''(σ_k). By the envelope
-theorem (sensitivity of a parametric program at a KKT point with unique multipliers),
+Stage 1 solves, on a grid σ_0 … σ_N, ``min_b Obj(b; θ)`` subject to the rows of
+:class:`~nearopt.timing.Discretisation` (torque and acceleration limits at the samples r, one speed
+row b θ'_i² ≤ v_i² per joint at the knots and inside segments). Its optimal value J*(θ) depends on
+the path only through the samples θ, θ', θ'' at those places. By the envelope theorem (sensitivity of
+a parametric program at a KKT point with unique multipliers),
 
-    dJ*/dp = ∂Obj/∂p + Σ_r μ_r^T ∂u_r/∂p + Σ_k ν_k ∂(b_k − b̄_k)/∂p      at the optimum b*,
+    dJ*/dp = ∂Obj/∂p + Σ_rows μ_row ∂row/∂p      at the optimum b*,
 
 so one stage-1 solve gives the exact gradient with respect to any path parameterisation p without
-differentiating through the solver. The multipliers μ ≥ 0 (torque limits) and ν ≥ 0 (speed bounds)
-are recovered from the KKT stationarity condition ∇_b Obj + Σ μ ∇_b u + ν = 0 over the constraints
-active at b*, by non-negative least squares; the residual of that fit is reported (it is ~0 at a
-true KKT point). ∂u/∂θ, ∂u/∂θ̇ and ∂u/∂θ̈ come from Pinocchio's analytic RNEA derivatives.
+differentiating through the solver. The multipliers μ are recovered from the KKT stationarity
+condition ∇_b Obj + Σ μ ∇_b row = 0 over the rows active at b*, by non-negative least squares; the
+residual of that fit is reported (it is ~0 at a true KKT point). ∂u/∂θ, ∂u/∂θ̇ and ∂u/∂θ̈ come from
+Pinocchio's analytic RNEA derivatives. Where two rows tie (two joints at their speed limit at the
+same knot) the multipliers are not unique and J* has a kink: the result is then one element of its
+subdifferential.
 """
 
 from __future__ import annotations
@@ -98,8 +101,8 @@ def timing_sensitivity(
     cost
         The running cost f0 that was minimised.
     active_tolerance
-        A torque sample within this fraction of its limit range from a limit (or a speed bound
-        within this fraction of itself) counts as active; inactive ones get μ = 0 from the fit.
+        A row within this fraction of its range (or of its bound, for one-sided rows) from a limit
+        counts as active; inactive ones get a zero multiplier from the fit.
     """
     disc = Discretisation(problem)
     p = problem
@@ -107,69 +110,67 @@ def timing_sensitivity(
     z = np.asarray(b, dtype=float)[1:-1]
     value, grad = disc.objective(z, cost)
 
-    # multipliers: columns are the signed gradients of the active constraints
-    u_flat = disc.torque(z)
-    tol = active_tolerance * (disc.upper - disc.lower)
-    upper = np.flatnonzero(u_flat >= disc.upper - tol)
-    lower = np.flatnonzero(u_flat <= disc.lower + tol)
-    jac = disc.torque_jacobian(z).tocsr()
-    ub = p.b_upper[1:-1]
-    speed = np.flatnonzero(np.isfinite(ub) & (z >= ub * (1.0 - active_tolerance)))
-    inside = np.flatnonzero(disc.speed @ z >= disc.speed_bound * (1.0 - active_tolerance))
+    # multipliers: columns are the signed gradients of the active rows (and of the b caps)
+    rows = disc.values(z)
+    span = np.where(np.isfinite(disc.lower), disc.upper - disc.lower, np.abs(disc.upper))
+    tol = active_tolerance * span
+    upper = np.flatnonzero(rows >= disc.upper - tol)
+    lower = np.flatnonzero(rows <= disc.lower + tol)
+    caps = np.flatnonzero(np.isfinite(disc.z_upper) & (z >= disc.z_upper * (1 - active_tolerance)))
+    jac = disc.jacobian(z)
     columns = np.hstack(
-        [
-            jac[upper].toarray().T,
-            -jac[lower].toarray().T,
-            np.eye(big_n - 1)[:, speed],
-            disc.speed[inside].toarray().T,
-        ]
+        [jac[upper].toarray().T, -jac[lower].toarray().T, np.eye(big_n - 1)[:, caps]]
     )
     if columns.shape[1]:
         mu, rnorm = nnls(columns, -grad, maxiter=50 * columns.shape[1])
     else:
         mu, rnorm = np.zeros(0), float(np.linalg.norm(grad))
-    signed = np.zeros(u_flat.size)
+    signed = np.zeros(rows.size)
     signed[upper] += mu[: upper.size]
     signed[lower] -= mu[upper.size : upper.size + lower.size]
-    nu = mu[upper.size + lower.size : upper.size + lower.size + speed.size]
-    nu_inside = mu[upper.size + lower.size + speed.size :]
 
     # the samples: node, segment, θ, θ̇ = λθ', θ̈ = bθ'' + aθ', u
     node, seg = disc.node, disc.seg
-    bk = np.concatenate([[0.0], z, [0.0]])
+    bk = disc.b(z)
     lam = np.sqrt(bk)[node]
     acc = (np.diff(bk) / (2.0 * disc.ds))[seg]
-    dt = disc.segment_times(z)
-    w = 0.5 * dt[seg]
+    w = 0.5 * disc.segment_times(z)[seg]
     th, dth = p.theta[node], p.dtheta[node]
-    ddth = p.ddtheta[node]
     qd = lam[:, None] * dth
-    u = u_flat.reshape(n, 2 * big_n).T
+    u = disc.torque(z).reshape(n, 2 * big_n).T
     df_dq, df_dqd, df_du = cost.gradients(th, qd, u)
-    zeta = w[:, None] * df_du + signed.reshape(n, 2 * big_n).T  # ∂L/∂u at every sample
+    # ∂L/∂u at every sample: the cost's share and the torque rows' multipliers
+    zeta = w[:, None] * df_du + signed[disc.blocks.torque].reshape(n, 2 * big_n).T
     du_dq, du_dv, h = robot.inverse_dynamics_derivatives(
-        th, qd, bk[node, None] * ddth + acc[:, None] * dth
+        th, qd, bk[node, None] * p.ddtheta[node] + acc[:, None] * dth
     )
     h_zeta = np.einsum("rij,ri->rj", h, zeta)
     g0 = np.einsum("rij,ri->rj", du_dq, zeta) + w[:, None] * df_dq
     g1 = lam[:, None] * (np.einsum("rij,ri->rj", du_dv, zeta) + w[:, None] * df_dqd)
     g1 += acc[:, None] * h_zeta
     g2 = bk[node, None] * h_zeta
+    # acceleration rows θ̈_i = θ'_i a + θ''_i b
+    block = disc.blocks.acceleration
+    sample, joint, mult = disc.location[block], disc.joint[block], signed[block]
+    np.add.at(g1, (sample, joint), mult * acc[sample])
+    np.add.at(g2, (sample, joint), mult * bk[node[sample]])
     d0, d1, d2 = (np.zeros((big_n + 1, n)) for _ in range(3))
     np.add.at(d0, node, g0)
     np.add.at(d1, node, g1)
     np.add.at(d2, node, g2)
-    # speed bounds b̄ = min_i v_i² / θ'_i² at the knots and at interior points
-    v = robot.limits.velocity
-    if speed.size:
-        knots = speed + 1
-        rows, joint, value = _speed_bound_gradient(p.dtheta[knots], v, nu)
-        d1[knots[rows], joint] += value
+    # speed rows b θ'_i² ≤ v_i² at the knots and inside segments: ∂/∂θ'_i = 2 b θ'_i
+    block = disc.blocks.speed
+    knot, joint = disc.location[block], disc.joint[block]
+    np.add.at(d1, (knot, joint), signed[block] * 2.0 * bk[knot] * p.dtheta[knot, joint])
     interior = p.interior_speed
     d_inside = np.zeros((0, n)) if interior is None else np.zeros_like(interior.dtheta)
-    if inside.size:
-        rows, joint, value = _speed_bound_gradient(interior.dtheta[inside], v, nu_inside)
-        d_inside[inside[rows], joint] = value
+    block = disc.blocks.interior_speed
+    if block.stop > block.start:
+        point, joint = disc.location[block], disc.joint[block]
+        k, weight = interior.segment[point], interior.weight[point]
+        b_at = (1.0 - weight) * bk[k] + weight * bk[k + 1]
+        slope = interior.dtheta[point, joint]
+        np.add.at(d_inside, (point, joint), signed[block] * 2.0 * b_at * slope)
     return PathSensitivity(
         value=value,
         theta=d0,
@@ -179,17 +180,3 @@ def timing_sensitivity(
         interior_dtheta=d_inside,
         residual=float(rnorm / max(np.linalg.norm(grad), 1e-300)),
     )
-
-
-def _speed_bound_gradient(
-    dtheta: NDArray[np.float64], velocity: NDArray[np.float64], nu: NDArray[np.float64]
-) -> tuple[NDArray[np.int64], NDArray[np.int64], NDArray[np.float64]]:
-    """∂/∂θ' of Σ ν (b − b̄) with b̄ = min_i v_i² / θ'_i²: 2 ν v_i² / θ'_i³ for the binding joint i.
-
-    Returns the rows, their binding joints and the values.
-    """
-    with np.errstate(divide="ignore"):
-        ratio = np.where(dtheta != 0, velocity**2 / dtheta**2, np.inf)
-    rows = np.arange(dtheta.shape[0])
-    joint = np.argmin(ratio, axis=1)
-    return rows, joint, nu * 2.0 * velocity[joint] ** 2 / dtheta[rows, joint] ** 3

@@ -13,6 +13,7 @@ so the duration is finite even at rest (λ ∝ √s near s = 0), unlike a λ(s) 
 from __future__ import annotations
 
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -24,10 +25,35 @@ if TYPE_CHECKING:
 
     from .path import Path
 
-__all__ = ["Trajectory", "segment_times"]
+__all__ = ["Trajectory", "Samples", "segment_times"]
 
 InverseDynamics = Callable[["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"],
                            "NDArray[np.float64]"]
+
+
+@dataclass(frozen=True)
+class Samples:
+    """A motion sampled at a controller rate, read-only arrays.
+
+    Attributes
+    ----------
+    t
+        Sample times from 0 to t_e inclusive [s], shape (M,) (the last step may be shorter).
+    q, qd, qdd
+        θ [rad or m], θ̇ [rad/s or m/s], θ̈ [rad/s² or m/s²] at those times, each (M, n).
+    tau
+        u by inverse dynamics (eq. 1) [N·m or N], shape (M, n).
+    """
+
+    t: NDArray[np.float64]
+    q: NDArray[np.float64]
+    qd: NDArray[np.float64]
+    qdd: NDArray[np.float64]
+    tau: NDArray[np.float64]
+
+    def __post_init__(self) -> None:
+        for value in (self.t, self.q, self.qd, self.qdd, self.tau):
+            value.setflags(write=False)
 
 
 def segment_times(s: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
@@ -111,8 +137,8 @@ class Trajectory:
         """u(t) by inverse dynamics (eq. 1) [N·m or N], shape (M, n)."""
         return self._inverse_dynamics(*self.states(t))
 
-    def sample(self, rate: float) -> dict[str, NDArray[np.float64]]:
-        """Samples at ``rate`` [Hz] from 0 to t_e inclusive: t, q, qd, qdd, tau.
+    def sample(self, rate: float) -> Samples:
+        """Samples at ``rate`` [Hz] from 0 to t_e inclusive (the last step shorter).
 
         Raises
         ------
@@ -130,7 +156,7 @@ class Trajectory:
         if t[-1] < self.duration:
             t = np.append(t, self.duration)
         q, qd, qdd = self.states(t)
-        return {"t": t, "q": q, "qd": qd, "qdd": qdd, "tau": self._inverse_dynamics(q, qd, qdd)}
+        return Samples(t, q, qd, qdd, self._inverse_dynamics(q, qd, qdd))
 
     def integrate(
         self, f0: Callable[..., NDArray[np.float64]], points: int = 6

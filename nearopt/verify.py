@@ -153,7 +153,9 @@ def verify(
         Expected start and goal [rad]; default: the motion's own ends (then only rest is checked).
     cost, J
         If both are given, J is recomputed as ∫ f0 dt by the trapezoidal rule on samples at
-        max(rate, 20 kHz) and compared with ``J`` (relative ``cost_tolerance``).
+        max(rate, 20 kHz) and on both sides of every time where the motion's acceleration jumps
+        (the trajectory's knot times: the rule is second-order between them, first-order across
+        a jump), and compared with ``J`` (relative ``cost_tolerance``).
     velocity_limits, position_limits
         Check the robot's joint speed / position limits.
     torque_tolerance
@@ -182,7 +184,7 @@ def verify(
         raise ConfigurationError(f"the controller rate must be > 0 Hz, got {rate}")
     n, names, lim = robot.n, list(robot.joint_names), robot.limits
     samples = trajectory.sample(rate)
-    t, q, qd, qdd = (samples[k] for k in ("t", "q", "qd", "qdd"))
+    t, q, qd, qdd = samples.t, samples.q, samples.qd, samples.qdd
     model, data = robot.model, robot.model.createData()
     u = np.array(
         [pin.rnea(model, data, *x) + robot.damping * x[1] for x in zip(q, qd, qdd, strict=True)]
@@ -214,12 +216,15 @@ def verify(
     checks.append(Check("rest at both ends", float(rest[k, i]), end_tolerance, "rad/s",
                         f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}"))
     if cost is not None and J is not None:
-        fine = trajectory.sample(max(rate, 20000.0))
+        fine = trajectory.sample(max(rate, 20000.0)).t
+        knots = trajectory.t[1:-1]
+        tf = np.sort(np.concatenate([fine, knots, knots - 1e-12 * max(1.0, trajectory.duration)]))
+        qf, qdf, qddf = trajectory.states(tf)
         uf = np.array([
             pin.rnea(model, data, *x) + robot.damping * x[1]
-            for x in zip(fine["q"], fine["qd"], fine["qdd"], strict=True)
+            for x in zip(qf, qdf, qddf, strict=True)
         ])
-        recomputed = float(np.trapezoid(cost(fine["q"], fine["qd"], uf), fine["t"]))
+        recomputed = float(np.trapezoid(cost(qf, qdf, uf), tf))
         checks.append(Check("J recomputed", abs(recomputed - J) / max(abs(J), 1e-12),
                             cost_tolerance, "relative",
                             f"(∫ f0 dt = {recomputed:.8g}, J = {J:.8g})"))

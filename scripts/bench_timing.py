@@ -43,7 +43,7 @@ def toppra_duration(robot: nearopt.Robot, path: nearopt.StraightPath, grid: int)
         ),
     ]
     # the same knots as nearopt's stage 1 (clustered at the rest ends)
-    knots = nearopt.timing.build_timing_problem(robot, path, grid=grid).s
+    knots = nearopt.timing.build_timing_problem(robot, path, grid=grid).sigma
     algo = ta.algorithm.TOPPRA(constraints, spline, gridpoints=knots)
     return algo.compute_trajectory(0, 0).duration
 

@@ -44,7 +44,7 @@ def test_plan_writes_the_documented_json(tmp_path: Path, mode: list[str]) -> Non
     np.testing.assert_allclose(q[-1], np.deg2rad([-90, 0]), atol=1e-8)
     # the torques in the file are those of the motion in the file, and within the limits
     robot = load("two_link")
-    u = torques_from_samples(robot, {"q": q, "qd": qd, "qdd": qdd})
+    u = torques_from_samples(robot, q, qd, qdd)
     np.testing.assert_allclose(tau, u, atol=1e-9)
     assert worst_torque_excess(robot, tau) <= 1e-6
     history = doc["history"]

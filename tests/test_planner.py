@@ -42,7 +42,7 @@ def test_stage1_sensitivity_matches_finite_differences(name: str, cost: nearopt.
         problem = build_timing_problem(robot, path, grid=80)
         sol = solve_timing(problem, cost)
         sens = timing_sensitivity(robot, problem, sol.b, cost)
-        return sol.objective, sens.gradient(path.basis, problem.s)
+        return sol.objective, sens.gradient(path.basis, problem.sigma)
 
     _, grad = solve(controls)
     # h = 1e-4: the re-solves carry noise ~1e-9 J (solver tolerance), i.e. ~1e-5 J / h in the
@@ -181,7 +181,7 @@ def test_position_limits_bind_when_the_free_optimum_leaves_them() -> None:
     hi = np.maximum(THETA_0, THETA_E) + 0.05
     narrow = robot.with_limits(position=(lo, hi))
     free = nearopt.plan(robot, THETA_0, THETA_E, PAPER_COST, grid=60, max_iterations=40)
-    q_free = free.trajectory.sample(500.0)["q"]
+    q_free = free.trajectory.sample(500.0).q
     assert np.any(q_free < lo) or np.any(q_free > hi)
     bound = nearopt.plan(narrow, THETA_0, THETA_E, PAPER_COST, grid=60, max_iterations=40)
     assert bound.J < bound.initial.J

@@ -47,31 +47,54 @@ and solves again.
 """
 
 from .between import BetweenSamples, tighten, uniform_slow_down
-from .discretisation import Discretisation
+from .conic import ConicSolution, is_solved, solve_conic
+from .discretisation import Discretisation, LinearRows, RowBlocks
 from .driver import TimingResult, optimal_timing
 from .problem import (
     MAX_GRID,
+    SPEED_SAFETY,
+    TORQUE_SAFETY,
     InteriorSpeed,
+    PathQuantity,
     TimingProblem,
+    acceleration_coefficients,
     build_timing_problem,
     check_gravity,
     grid_knots,
-    speed_bound,
+    safe_limits,
 )
-from .solvers import TimingSolution, into_limits, largest_scale, solve_timing
+from .solvers import (
+    TimingMethod,
+    TimingSolution,
+    TimingStatus,
+    into_limits,
+    largest_scale,
+    solve_timing,
+)
 
 __all__ = [
     "MAX_GRID",
+    "SPEED_SAFETY",
+    "TORQUE_SAFETY",
+    "PathQuantity",
     "InteriorSpeed",
     "TimingProblem",
     "TimingSolution",
+    "TimingStatus",
+    "TimingMethod",
     "TimingResult",
     "Discretisation",
+    "LinearRows",
+    "RowBlocks",
+    "ConicSolution",
+    "solve_conic",
+    "is_solved",
     "BetweenSamples",
+    "safe_limits",
+    "acceleration_coefficients",
     "build_timing_problem",
     "check_gravity",
     "grid_knots",
-    "speed_bound",
     "solve_timing",
     "optimal_timing",
     "into_limits",

@@ -1,113 +1,258 @@
-"""The discretised stage-1 problem as functions of the free speeds z = b_1 … b_{N−1}.
+"""The discretised stage-1 problem: every constraint row and sample, built once.
 
-:class:`Discretisation` holds the torque samples of a :class:`~nearopt.timing.TimingProblem` as
-linear functions of z (plus the damping term d√b), the interior speed rows and the discretised cost
-with its gradient; the solvers and the sensitivity read them from here.
+Notation: knots σ_0 = 0 < … < σ_N = 1, b_k = λ(σ_k)², segment k = [σ_k, σ_{k+1}] with the constant
+path acceleration a_k = (b_{k+1} − b_k) / (2Δσ_k). Samples r = 0 … 2N−1: sample r < N is the start
+of segment r (knot r), sample r ≥ N the end of segment r − N (knot r − N + 1); ``node[r]`` and
+``seg[r]`` say which. The free variables are z = (b_1 … b_{N−1}); b_0 = b_N = 0 (rest).
+
+:class:`Discretisation` turns a :class:`~nearopt.timing.TimingProblem` into rows
+
+    lower ≤ A b + d·√b_node + offset ≤ upper,
+
+in blocks (:class:`RowBlocks`):
+
+* torque: u_{r,i} = m_i a_seg + c_i b_node + d_i √b_node + g_i at every sample and joint
+  (joint-major: row i·2N + r), within the effort limits minus the margins;
+* acceleration: θ̈_{r,i} = θ'_i a_seg + θ''_i b_node, likewise, for joints with a limit;
+* speed: b_k θ'_i(σ_k)² ≤ v_i² at every free knot, one row per joint that moves and has a limit;
+* interior speed: ((1 − w) b_k + w b_{k+1}) θ'_i(σ_p)² ≤ v_i² at points inside segments, where the
+  knots' own rows do not imply it.
+
+The LP, SOCP and NLP back ends read these rows (:meth:`Discretisation.linear_rows`), and so does
+the stage-1 sensitivity (which differentiates each row with respect to the path).
 """
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
 import scipy.sparse as sp
 
 from ..trajectory import segment_times
+from .problem import SPEED_SAFETY, safe_limits
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from ..cost import Cost
-    from .problem import TimingProblem
+    from .problem import PathQuantity, TimingProblem
 
-__all__ = ["Discretisation"]
+__all__ = ["Discretisation", "RowBlocks", "LinearRows"]
+
+
+class RowBlocks(NamedTuple):
+    """Where each kind of row lies in :attr:`Discretisation.matrix` (slices of the rows)."""
+
+    torque: slice
+    acceleration: slice
+    speed: slice
+    interior_speed: slice
+
+
+class LinearRows(NamedTuple):
+    """Rows linear in z: ``lower ≤ matrix @ z ≤ upper`` (±inf where a side is open)."""
+
+    matrix: sp.csr_matrix
+    lower: NDArray[np.float64]
+    upper: NDArray[np.float64]
 
 
 class Discretisation:
-    """Torque samples and the cost as functions of the free variables z = b_1 … b_{N−1}."""
+    """Every constraint row of stage 1 and the discretised cost, as functions of z.
+
+    Attributes
+    ----------
+    problem
+        The problem the rows come from.
+    node, seg
+        Knot and segment of every sample, shape (2N,).
+    ds
+        Δσ_k, shape (N,).
+    matrix
+        A: coefficients of b at every knot, sparse (R, N+1).
+    sqrt_coef, sqrt_node
+        d and the knot of √b in every row, shape (R,) (d = 0 but in damped torque rows).
+    offset, lower, upper
+        The rows' constants and limits, shape (R,), margins and the safety margin applied.
+    blocks
+        The row ranges of each kind.
+    joint
+        The joint of every row, shape (R,).
+    location
+        Where every row lies: the sample r (torque, acceleration), the knot k (speed) or the
+        interior point p (interior speed), shape (R,).
+    z_upper
+        Upper bounds on z from ``problem.b_upper`` (inf where none), shape (N−1,).
+    has_damping
+        Whether any row has a √b term.
+    """
 
     def __init__(self, problem: TimingProblem) -> None:
         p = problem
-        big_n, n = p.segments, p.dof
-        ds = np.diff(p.s)
-        # sample r: node[r], segment seg[r]; r < N: start of segment r, r ≥ N: end of segment r − N
+        big_n = p.segments
+        self.problem = p
+        self.ds = np.diff(p.sigma)
         self.node = np.concatenate([np.arange(big_n), np.arange(1, big_n + 1)])
         self.seg = np.concatenate([np.arange(big_n), np.arange(big_n)])
-        self.ds = ds
-        self.problem = p
+        parts = [self._samples(p.torque, keep_all=True)]
+        parts.append(self._samples(p.acceleration) if p.acceleration is not None else None)
+        parts += [self._speed_at_knots(), self._speed_inside()]
+        sizes, stacks = [], []
+        for part in parts:
+            sizes.append(0 if part is None else part[0].shape[0])
+            if part is not None:
+                stacks.append(part)
+        ends = np.cumsum([0, *sizes])
+        self.blocks = RowBlocks(
+            *(slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:], strict=True))
+        )
+        self.matrix = sp.vstack([s[0] for s in stacks]).tocsr()
+        self.sqrt_coef, self.offset, self.lower, self.upper, self.joint, self.location = (
+            np.concatenate([s[k] for s in stacks]) for k in range(1, 7)
+        )
+        self.sqrt_node = np.zeros(self.offset.size, dtype=int)
+        torque_rows = self.blocks.torque
+        self.sqrt_node[torque_rows] = self.node[self.location[torque_rows]]
+        self.has_damping = bool(np.any(self.sqrt_coef != 0.0))
+        self._free = self.matrix[:, 1:-1].tocsc()
+        b_upper = np.full(big_n + 1, np.inf) if p.b_upper is None else p.b_upper
+        self.z_upper = np.asarray(b_upper[1:-1], dtype=float)
+
+    # ---------------------------------------------------------------- building the rows
+    def _samples(self, quantity: PathQuantity, keep_all: bool = False) -> tuple | None:
+        """Rows q_{r,i} = m a_seg + c b_node + d √b_node + g within the limits, joint-major."""
+        p, node, seg = self.problem, self.node, self.seg
+        big_n, n = p.segments, p.dof
+        coef = quantity.coef
+        limited = np.isfinite(quantity.lower) | np.isfinite(quantity.upper)
+        joints = [i for i in range(n) if keep_all or limited[i]]
+        if not joints:
+            return None
+        margin = np.zeros((2 * big_n, n)) if quantity.margin is None else quantity.margin
+        lower, upper = safe_limits(quantity)
         rows = np.arange(2 * big_n)
         blocks = []
-        for i in range(n):
-            m, c = p.coef.m[self.node, i], p.coef.c[self.node, i]
-            slope = m / (2.0 * ds[self.seg])
+        for i in joints:
+            slope = coef.m[node, i] / (2.0 * self.ds[seg])
             blocks.append(
                 sp.coo_matrix(
                     (
-                        np.concatenate([-slope, slope, c]),
-                        (np.tile(rows, 3), np.concatenate([self.seg, self.seg + 1, self.node])),
+                        np.concatenate([-slope, slope, coef.c[node, i]]),
+                        (np.tile(rows, 3), np.concatenate([seg, seg + 1, node])),
                     ),
                     shape=(2 * big_n, big_n + 1),
                 )
             )
-        # rows joint-major (i·2N + r); columns: the free knots 1 … N−1
-        self.k_full = sp.vstack(blocks).tocsr()
-        self.k = self.k_full[:, 1:-1].tocsc()
-        self.u0 = p.coef.g[self.node].T.ravel()
-        self.damp = p.coef.d[self.node].T.ravel()
-        self.has_damping = bool(np.any(self.damp != 0.0))
-        self.lower = np.repeat(p.u_lower, 2 * big_n)
-        self.upper = np.repeat(p.u_upper, 2 * big_n)
-        # interior speed limits as rows S z ≤ bound (S ≥ 0)
-        speed = p.interior_speed
-        count = 0 if speed is None else speed.bound.size
-        cols = np.concatenate([speed.segment, speed.segment + 1]) if count else np.zeros(0, int)
-        vals = np.concatenate([1.0 - speed.weight, speed.weight]) if count else np.zeros(0)
-        self.speed = sp.csr_matrix(
-            (vals, (np.tile(np.arange(count), 2), cols)), shape=(count, big_n + 1)
-        )[:, 1:-1].tocsr()
-        self.speed_bound = speed.bound if count else np.zeros(0)
-        if p.margin is not None:
-            self.lower = self.lower + p.margin.T.ravel()
-            self.upper = self.upper - p.margin.T.ravel()
+        joints = np.array(joints)
+        return (
+            sp.vstack(blocks),
+            coef.d[node][:, joints].T.ravel(),
+            coef.g[node][:, joints].T.ravel(),
+            (lower[joints][:, None] + margin[:, joints].T).ravel(),
+            (upper[joints][:, None] - margin[:, joints].T).ravel(),
+            np.repeat(joints, 2 * big_n),
+            np.tile(rows, joints.size),
+        )
 
+    def _speed_rows(
+        self, cols: list[NDArray[np.int64]], weights: list[NDArray[np.float64]],
+        dtheta: NDArray[np.float64], keep: NDArray[np.bool_],
+    ) -> tuple | None:
+        """Rows Σ_j w_j b_{col_j} θ'_i² ≤ v_i² at points with slopes ``dtheta`` (P, n)."""
+        p = self.problem
+        v = p.velocity
+        point, joint = np.nonzero(keep & np.isfinite(v)[None, :] & (dtheta != 0.0))
+        if point.size == 0:
+            return None
+        count = point.size
+        slope2 = dtheta[point, joint] ** 2
+        data = np.concatenate([w[point] * slope2 for w in weights])
+        row = np.tile(np.arange(count), len(cols))
+        col = np.concatenate([c[point] for c in cols])
+        matrix = sp.coo_matrix((data, (row, col)), shape=(count, p.segments + 1))
+        upper = v[joint] ** 2 * (1.0 - 2.0 * SPEED_SAFETY)
+        zero = np.zeros(count)
+        return matrix, zero, zero.copy(), np.full(count, -np.inf), upper, joint, point
+
+    def _speed_at_knots(self) -> tuple | None:
+        p = self.problem
+        knots = np.arange(p.segments + 1)
+        keep = np.zeros(p.dtheta.shape, dtype=bool)
+        keep[1:-1] = True  # b_0 = b_N = 0
+        return self._speed_rows([knots], [np.ones(knots.size)], p.dtheta, keep)
+
+    def _speed_inside(self) -> tuple | None:
+        p = self.problem
+        inside = p.interior_speed
+        if inside is None:
+            return None
+        k = inside.segment
+        # implied by the knots' rows where θ'_i² there is at least as large as inside
+        bound = np.minimum(p.dtheta[k] ** 2, p.dtheta[k + 1] ** 2)
+        keep = inside.dtheta**2 > bound
+        return self._speed_rows([k, k + 1], [1.0 - inside.weight, inside.weight], inside.dtheta,
+                                keep)
+
+    # ---------------------------------------------------------------- evaluating
     def b(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """b at every knot from the free ones, shape (N+1,)."""
         return np.concatenate([[0.0], z, [0.0]])
 
+    def values(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Every row's value A b + d √b + offset, shape (R,)."""
+        b = self.b(z)
+        return self.matrix @ b + self.sqrt_coef * np.sqrt(b)[self.sqrt_node] + self.offset
+
+    def excess(self, z: NDArray[np.float64]) -> float:
+        """The largest violation of any row (≤ 0 when z is feasible), in the rows' units."""
+        value = self.values(z)
+        return float(max(np.max(value - self.upper), np.max(self.lower - value)))
+
     def torque(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
-        """All torque samples, joint-major, shape (n·2N,)."""
-        u = self.k @ z + self.u0
-        if self.has_damping:
-            u += self.damp * np.tile(np.sqrt(self.b(z))[self.node], self.problem.dof)
-        return u
+        """All torque samples, joint-major (row i·2N + r), shape (n·2N,)."""
+        return self.values(z)[self.blocks.torque] if self.blocks.torque.stop else np.zeros(0)
 
-    def torque_jacobian(self, z: NDArray[np.float64]) -> sp.csc_matrix:
+    def linear_rows(self, z_lin: NDArray[np.float64] | None) -> LinearRows:
+        """The rows as ``lower ≤ M z ≤ upper``, the damping d√b replaced by its tangent at
+        ``z_lin`` (exact there), or dropped when ``z_lin`` is None."""
+        matrix, const = self._free, self.offset.copy()
+        if self.has_damping and z_lin is not None:
+            jac, value = self._sqrt_tangent(z_lin)
+            matrix = (matrix + jac).tocsc()
+            const = const + value - jac @ z_lin
+        return LinearRows(matrix.tocsr(), self.lower - const, self.upper - const)
+
+    def jacobian(self, z: NDArray[np.float64]) -> sp.csr_matrix:
+        """∂(rows)/∂z at z, sparse (R, N−1)."""
         if not self.has_damping:
-            return self.k
-        return (self.k + sp.diags(self.damp) @ self._sqrt_b_jacobian(z)).tocsc()
+            return self._free.tocsr()
+        return (self._free + self._sqrt_tangent(z)[0]).tocsr()
 
-    def _sqrt_b_jacobian(self, z: NDArray[np.float64]) -> sp.csr_matrix:
-        """∂√b(node[r]) / ∂z for every sample row (tiled over joints)."""
+    def _sqrt_tangent(self, z: NDArray[np.float64]) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
+        """∂(d √b_node)/∂z and d √b_node for every row."""
         big_n = self.problem.segments
-        col = self.node - 1
-        free = (col >= 0) & (col < big_n - 1)
-        vals = np.zeros(self.node.size)
-        vals[free] = 0.5 / np.sqrt(z[col[free]])
-        j = sp.coo_matrix(
-            (vals[free], (np.arange(self.node.size)[free], col[free])),
-            shape=(self.node.size, big_n - 1),
+        col = self.sqrt_node - 1
+        free = (col >= 0) & (col < big_n - 1) & (self.sqrt_coef != 0.0)
+        root = np.sqrt(self.b(z))[self.sqrt_node]
+        vals = np.zeros(col.size)
+        vals[free] = 0.5 * self.sqrt_coef[free] / np.sqrt(z[col[free]])
+        jac = sp.csr_matrix(
+            (vals[free], (np.flatnonzero(free), col[free])), shape=(col.size, big_n - 1)
         )
-        return sp.vstack([j] * self.problem.dof).tocsr()
+        return jac, self.sqrt_coef * root
 
     def segment_times(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
-        return segment_times(self.problem.s, self.b(z))
+        """Δt_k of every segment [s], shape (N,)."""
+        return segment_times(self.problem.sigma, self.b(z))
 
     def objective(self, z: NDArray[np.float64], cost: Cost) -> tuple[float, NDArray[np.float64]]:
-        """The discretised J and its gradient with respect to z."""
+        """The discretised J = Σ Δt_k ½ [f0(k⁺) + f0((k+1)⁻)] and its gradient with respect to z."""
         p = self.problem
         n, big_n = p.dof, p.segments
         b = self.b(z)
         lam = np.sqrt(b)
-        dt = segment_times(p.s, b)
+        dt = segment_times(p.sigma, b)
         u = self.torque(z).reshape(n, 2 * big_n).T
         q = p.theta[self.node]
         qd = p.dtheta[self.node] * lam[self.node, None]
@@ -124,10 +269,12 @@ class Discretisation:
         np.add.at(grad, np.arange(1, big_n + 1), ddt * inv2lam[1:] * fbar)
         weight = 0.5 * dt[self.seg]  # each sample's share of its segment's time
         du = weight[:, None] * df_du  # ∂J/∂u at every sample, (2N, n)
-        grad += np.asarray(self.k_full.T @ du.T.ravel()).ravel()
+        torque = self.matrix[self.blocks.torque]
+        grad += np.asarray(torque.T @ du.T.ravel()).ravel()
         # through λ = √b of the sample's knot: θ̇ = λθ' and the damping torque dλ
+        damp = self.sqrt_coef[self.blocks.torque].reshape(n, 2 * big_n).T
         node_term = weight * np.sum(df_dqd * p.dtheta[self.node], axis=1) + np.sum(
-            du * p.coef.d[self.node], axis=1
+            du * damp, axis=1
         )
         np.add.at(grad, self.node, node_term * inv2lam[self.node])
         return value, grad[1:-1]

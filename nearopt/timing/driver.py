@@ -12,7 +12,7 @@ from ..cost import Cost, TimeCost
 from ..trajectory import Trajectory
 from .between import BetweenSamples, tighten, uniform_slow_down
 from .problem import build_timing_problem
-from .solvers import solve_timing
+from .solvers import TimingMethod, TimingStatus, solve_timing
 
 if TYPE_CHECKING:
     from ..path import Path
@@ -36,7 +36,7 @@ class TimingResult:
     objective
         The discretised cost the solver minimised (differs from J by the discretisation, O(Δs²)).
     status, solver, iterations, message
-        As in :class:`TimingSolution`.
+        As in :class:`~nearopt.timing.TimingSolution`.
     wall_time
         Time spent [s], building the problem included.
     """
@@ -45,8 +45,8 @@ class TimingResult:
     J: float
     duration: float
     objective: float
-    status: str
-    solver: str
+    status: TimingStatus
+    solver: TimingMethod
     iterations: int
     message: str
     wall_time: float
@@ -66,7 +66,9 @@ def optimal_timing(
     Parameters
     ----------
     robot
-        The arm; its effort limits (and, if ``velocity_limits``, speed limits) are enforced.
+        The arm; its effort limits, its acceleration limits (if it has any, see
+        :meth:`~nearopt.Robot.with_limits`) and, if ``velocity_limits``, its speed limits are
+        enforced, at all times (not only at samples; see :class:`BetweenSamples`).
     path
         The spatial path θ(s).
     cost
@@ -93,22 +95,22 @@ def optimal_timing(
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
     sol = solve_timing(problem, cost, tolerance=tolerance)  # gravity checked at the knots
     between = BetweenSamples(robot, path, problem)  # and between them
-    velocity = robot.limits.velocity if velocity_limits else None
     for _ in range(4):
         # where the motion leaves a limit between samples: a uniform slow-down by α if that
         # costs less than 1e-5 of b (below the grid's own error), otherwise tighten and re-solve
-        b = uniform_slow_down(between, sol.b, velocity)
+        b = uniform_slow_down(between, sol.b)
         if np.all(b >= (1.0 - 1e-5) * sol.b):
             break
-        tighter = tighten(problem, between, sol.b, velocity)
+        tighter = tighten(problem, between, sol.b)
         if tighter is None:
             break
         problem = tighter
         sol = solve_timing(problem, cost, tolerance=tolerance)
     else:
-        b = uniform_slow_down(between, sol.b, velocity)
+        b = uniform_slow_down(between, sol.b)
     # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
-    traj = Trajectory(path, problem.s * path.s_end, b * path.s_end**2, robot.inverse_dynamics_batch)
+    traj = Trajectory(path, problem.sigma * path.s_end, b * path.s_end**2,
+                      robot.inverse_dynamics_batch)
     return TimingResult(
         trajectory=traj,
         J=traj.integrate(cost),

@@ -15,17 +15,21 @@ from ..errors import ConfigurationError, InfeasiblePathError
 from ..robot import PathCoefficients
 
 if TYPE_CHECKING:
-    from numpy.typing import NDArray
+    from numpy.typing import ArrayLike, NDArray
 
     from ..path import Path
     from ..robot import Robot
 
 __all__ = [
     "MAX_GRID",
+    "TORQUE_SAFETY",
+    "SPEED_SAFETY",
+    "PathQuantity",
     "InteriorSpeed",
     "TimingProblem",
+    "acceleration_coefficients",
     "build_timing_problem",
-    "speed_bound",
+    "safe_limits",
     "check_gravity",
     "grid_knots",
 ]
@@ -33,18 +37,43 @@ __all__ = [
 MAX_GRID = 100_000  # segments; stage 1's memory grows linearly beyond any use
 
 
-class InteriorSpeed(NamedTuple):
-    """Joint speed limits at points inside the segments: b(σ_p) ≤ bound_p.
+class PathQuantity(NamedTuple):
+    """A per-joint quantity along the path that is affine in the timing, with its limits.
 
-    b is linear on a segment, so at σ_p = σ_k + w_p Δσ_k this reads
-    (1 − w_p) b_k + w_p b_{k+1} ≤ bound_p = min_i v_i² / θ'_i(σ_p)².
+    q = m·a + c·b + d·λ + g with b = λ² = (dσ/dt)² and a = ½ db/dσ: the torque of eq. (10)
+    (m = Hθ', c = Hθ'' + h(θ, θ'), d = Dθ', g = g(θ)) and the joint acceleration
+    θ̈ = θ'·a + θ''·b (m = θ', c = θ'', d = g = 0) are of this form.
+
+    Attributes
+    ----------
+    coef
+        m, c, d, g at the knots, each of shape (N+1, n).
+    lower, upper
+        Its limits, shape (n,) (±inf where a joint has none).
+    margin
+        Optional margins at the samples, shape (2N, n): rows 0 … N−1 at the start of segments
+        0 … N−1, rows N … 2N−1 at their ends. Stage 1 keeps each sample this far inside both
+        limits; :func:`~nearopt.timing.optimal_timing` sets them where the quantity bulges out
+        between samples.
+    """
+
+    coef: PathCoefficients
+    lower: NDArray[np.float64]
+    upper: NDArray[np.float64]
+    margin: NDArray[np.float64] | None = None
+
+
+class InteriorSpeed(NamedTuple):
+    """Points inside the segments where the joint speed limits are imposed too.
+
+    b is linear on a segment, so at σ_p = σ_k + w_p Δσ_k the limit of joint i reads
+    ((1 − w_p) b_k + w_p b_{k+1}) θ'_i(σ_p)² ≤ v_i².
     """
 
     segment: NDArray[np.int64]
     weight: NDArray[np.float64]
     sigma: NDArray[np.float64]
     dtheta: NDArray[np.float64]
-    bound: NDArray[np.float64]
 
 
 @dataclass(frozen=True)
@@ -53,50 +82,62 @@ class TimingProblem:
 
     Attributes
     ----------
-    s
+    sigma
         Knots of the normalised path parameter σ = s / s_e, 0 = σ_0 < … < σ_N = 1, shape (N+1,).
         The kernel works in σ so that b = (dσ/dt)² is of the order of 1/t_e² whatever the unit
         of s; J does not depend on that choice.
     theta, dtheta, ddtheta
         θ(σ_k) [rad], dθ/dσ and d²θ/dσ² [rad] at the knots, shape (N+1, n).
-    coef
-        m, c, d, g of eq. (10) with respect to σ at the knots, each (N+1, n).
-    u_lower, u_upper
-        Actuator limits of eq. (2) [N·m], shape (n,).
-    b_upper
-        Upper bound on b = (dσ/dt)² at each knot from the joint speed limits (inf if none), (N+1,).
+    torque
+        The actuator torques u of eq. (10) [N·m or N] with the limits of eq. (2).
+    velocity
+        Joint speed limits |θ̇_i| ≤ v_i [rad/s or m/s], shape (n,); inf where none is enforced.
+        At every knot b_k θ'_i(σ_k)² ≤ v_i², one row per joint.
     joint_names
         Names of the n joints, for messages.
-    margin
-        Optional torque margins [N·m] at the samples, shape (2N, n): rows 0 … N−1 at the start of
-        segments 0 … N−1, rows N … 2N−1 at their ends. Stage 1 keeps each sample this far inside
-        both limits; :func:`optimal_timing` sets them where the torque bulges out between samples.
+    acceleration
+        Joint accelerations θ̈ [rad/s² or m/s²] with their limits, or None when no joint has one.
     interior_speed
-        Joint speed limits at points inside the segments (on a curved path |θ'| peaks between
-        knots); None without speed limits.
+        Points inside the segments where the speed limits are imposed too (on a curved path |θ'|
+        peaks between knots); None without speed limits.
+    b_upper
+        Extra upper bounds on b at the knots, shape (N+1,) (inf where none), set where the speed
+        bulges out between samples.
     """
 
-    s: NDArray[np.float64]
+    sigma: NDArray[np.float64]
     theta: NDArray[np.float64]
     dtheta: NDArray[np.float64]
     ddtheta: NDArray[np.float64]
-    coef: PathCoefficients
-    u_lower: NDArray[np.float64]
-    u_upper: NDArray[np.float64]
-    b_upper: NDArray[np.float64]
+    torque: PathQuantity
+    velocity: NDArray[np.float64]
     joint_names: tuple[str, ...]
-    margin: NDArray[np.float64] | None = None
+    acceleration: PathQuantity | None = None
     interior_speed: InteriorSpeed | None = None
+    b_upper: NDArray[np.float64] | None = None
 
     @property
     def segments(self) -> int:
         """N, the number of grid segments."""
-        return self.s.size - 1
+        return self.sigma.size - 1
 
     @property
     def dof(self) -> int:
         """n, the number of joints."""
         return self.theta.shape[1]
+
+    @property
+    def quantities(self) -> tuple[PathQuantity, ...]:
+        """The limited quantities affine in the timing: the torque first, then θ̈ if limited."""
+        return (self.torque,) if self.acceleration is None else (self.torque, self.acceleration)
+
+
+# the relative safety margins of the limits imposed at the samples: the motion between samples is
+# bounded from samples (see between.py) and this small margin absorbs the error of that bound, so
+# that what stage 1 returns passes verify() at its default tolerances (1e-6 relative for torques,
+# 1e-9 for speeds) [fraction of the limit]
+TORQUE_SAFETY = 1e-8
+SPEED_SAFETY = 1e-11
 
 
 def build_timing_problem(
@@ -106,16 +147,21 @@ def build_timing_problem(
     grid: int = 200,
     velocity_limits: bool = True,
 ) -> TimingProblem:
-    """Sample a path on a grid clustered at the rest ends and collect what stage 1 needs.
+    """Sample a path on a grid and collect what stage 1 needs.
+
+    The knots are clustered at the rest ends (:func:`grid_knots`) and include the path's own
+    breakpoints (``path.breakpoints``: a spline's knots, where θ'' jumps), so that the path is
+    smooth inside every segment.
 
     Parameters
     ----------
     robot
-        The arm (its limits are the ones enforced).
+        The arm: its torque limits, its joint acceleration limits (if any) and, if
+        ``velocity_limits``, its joint speed limits are enforced.
     path
         θ(s), s ∈ [0, s_e], with ``path.dof == robot.n``.
     grid
-        N, the number of segments (≥ 2).
+        N, the number of segments (≥ 2); one more per breakpoint that needs its own segment.
     velocity_limits
         Enforce the robot's joint speed limits |θ̇_i| ≤ v_i.
     """
@@ -123,46 +169,59 @@ def build_timing_problem(
         raise ConfigurationError(f"grid must be an integer ≥ 2 and ≤ {MAX_GRID}, got {grid!r}")
     if path.dof != robot.n:
         raise ConfigurationError(f"the path has {path.dof} joints, {robot.name} has {robot.n}")
-    sigma = grid_knots(grid)
+    breaks = np.asarray(getattr(path, "breakpoints", ()), dtype=float) / path.s_end
+    sigma = grid_knots(int(grid), breaks)
     s = sigma * path.s_end
     theta = path(s, 0)
     dtheta = path(s, 1) * path.s_end  # d/dσ = s_e d/ds
     ddtheta = path(s, 2) * path.s_end**2
-    coef = robot.path_coefficients(theta, dtheta, ddtheta)
-    b_upper = np.full(s.size, np.inf)
+    lim = robot.limits
+    torque = PathQuantity(
+        robot.path_coefficients(theta, dtheta, ddtheta),
+        np.array(lim.effort_lower),
+        np.array(lim.effort_upper),
+    )
+    acceleration = None
+    if np.any(np.isfinite(lim.acceleration)):
+        acceleration = PathQuantity(
+            acceleration_coefficients(dtheta, ddtheta), -np.array(lim.acceleration),
+            np.array(lim.acceleration),
+        )
+    velocity = np.array(lim.velocity) if velocity_limits else np.full(robot.n, np.inf)
     interior = None
-    v = robot.limits.velocity
-    if velocity_limits and np.any(np.isfinite(v)):
-        b_upper = speed_bound(dtheta, v)
+    if np.any(np.isfinite(velocity)):
         # three points inside every segment, where |θ'| of a curved path may peak
-        segment = np.repeat(np.arange(grid), 3)
-        weight = np.tile([0.25, 0.5, 0.75], grid)
+        big_n = sigma.size - 1
+        segment = np.repeat(np.arange(big_n), 3)
+        weight = np.tile([0.25, 0.5, 0.75], big_n)
         at = sigma[segment] + weight * np.diff(sigma)[segment]
-        d_at = path(at * path.s_end, 1) * path.s_end
-        bound = speed_bound(d_at, v)
-        # b(σ_p) is a convex combination of b_k and b_{k+1}: a row is redundant where the knots'
-        # own bounds already imply it (always, on a straight line)
-        keep = bound < np.maximum(b_upper[segment], b_upper[segment + 1])
-        interior = InteriorSpeed(segment[keep], weight[keep], at[keep], d_at[keep], bound[keep])
+        interior = InteriorSpeed(segment, weight, at, path(at * path.s_end, 1) * path.s_end)
     return TimingProblem(
-        s=sigma,
+        sigma=sigma,
         theta=theta,
         dtheta=dtheta,
         ddtheta=ddtheta,
-        coef=coef,
-        u_lower=np.array(robot.limits.effort_lower),
-        u_upper=np.array(robot.limits.effort_upper),
-        b_upper=b_upper,
+        torque=torque,
+        velocity=velocity,
         joint_names=tuple(robot.joint_names),
+        acceleration=acceleration,
         interior_speed=interior,
     )
 
 
-def speed_bound(dtheta: NDArray[np.float64], velocity: NDArray[np.float64]) -> NDArray[np.float64]:
-    """min_i v_i² / θ'_i² per row (inf where no joint moves or no limit is finite)."""
-    with np.errstate(divide="ignore", invalid="ignore"):
-        ratio = np.where(dtheta != 0, velocity**2 / dtheta**2, np.inf)
-    return np.min(np.where(np.isnan(ratio), np.inf, ratio), axis=1)
+def acceleration_coefficients(
+    dtheta: NDArray[np.float64], ddtheta: NDArray[np.float64]
+) -> PathCoefficients:
+    """θ̈ = θ'·a + θ''·b as coefficients m = θ', c = θ'', d = g = 0, each of the shape of θ'."""
+    zero = np.zeros_like(dtheta)
+    return PathCoefficients(dtheta, ddtheta, zero, zero.copy())
+
+
+def safe_limits(quantity: PathQuantity) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The limits of a quantity less the safety margin (what stage 1 holds its samples to)."""
+    scale = np.maximum(np.abs(quantity.lower), np.abs(quantity.upper))
+    margin = TORQUE_SAFETY * np.where(np.isfinite(scale), scale, 0.0)
+    return quantity.lower + margin, quantity.upper - margin
 
 
 def check_gravity(
@@ -171,21 +230,23 @@ def check_gravity(
     sigma: NDArray[np.float64] | None = None,
     theta: NDArray[np.float64] | None = None,
 ) -> None:
-    """Raise InfeasiblePathError where gravity alone leaves the torque limits (b → 0 ⇒ u → g).
+    """Raise InfeasiblePathError where gravity alone leaves the torque limits (b → 0 ⇒ u → g),
+    less the safety margin.
 
     By default at the problem's knots; ``g``, ``sigma``, ``theta`` give other points of the path
     (sorted by σ), e.g. those between the knots.
     """
     if g is None:
-        g, sigma, theta = problem.coef.g, problem.s, problem.theta
-    margin = 1e-9 * (problem.u_upper - problem.u_lower)
-    over = g - (problem.u_upper - margin)
-    under = (problem.u_lower + margin) - g
+        g, sigma, theta = problem.torque.coef.g, problem.sigma, problem.theta
+    lower, upper = problem.torque.lower, problem.torque.upper
+    safe_lower, safe_upper = safe_limits(problem.torque)
+    over = g - safe_upper
+    under = safe_lower - g
     excess = np.maximum(over, under)
     if np.any(excess > 0):
         k, i = np.unravel_index(np.argmax(excess), excess.shape)
         side = "upper" if over[k, i] >= under[k, i] else "lower"
-        limit = problem.u_upper[i] if side == "upper" else problem.u_lower[i]
+        limit = upper[i] if side == "upper" else lower[i]
         bad = sigma[np.any(excess > 0, axis=1)]
         raise InfeasiblePathError(
             f"no timing of this path respects the torque limits: gravity alone needs "
@@ -199,13 +260,43 @@ def check_gravity(
         )
 
 
-def grid_knots(segments: int) -> NDArray[np.float64]:
-    """Knots σ_k = ½(1 − cos(πk/N)) (Chebyshev-Lobatto), O(1/N²) apart at the rest ends.
+def grid_knots(segments: int, breakpoints: ArrayLike = ()) -> NDArray[np.float64]:
+    """Knots clustered at the rest ends that include the given breakpoints.
 
+    Without breakpoints σ_k = ½(1 − cos(πk/N)) (Chebyshev-Lobatto), O(1/N²) apart at the rest ends.
     At rest b ∝ σ, so λ = √b varies fastest next to σ = 0 and 1: there the trapezoidal weights of
     a segment's two torque samples are least accurate (the time spent in the first segment lies
     mostly near its start). Clustering the knots there makes the discretised J converge much
     faster than on a uniform grid (measured on the paper's example: 0.02 % instead of 0.3 % at
     N = 200 on a curved path).
+
+    Breakpoints σ_b ∈ (0, 1) (where θ'' of the path jumps) split x = arccos(1 − 2σ)/π, in which
+    the Chebyshev knots are uniform, into pieces; each piece gets a share of the N segments in
+    proportion to its length (at least one), uniform in x, so every breakpoint is a knot and no
+    segment straddles one. With B breakpoints in distinct places the grid has max(N, B + 1)
+    segments.
+
+    Parameters
+    ----------
+    segments
+        N, the number of segments.
+    breakpoints
+        σ of the breakpoints (any order; those outside (0, 1) are ignored).
     """
-    return 0.5 * (1.0 - np.cos(np.pi * np.arange(segments + 1) / segments))
+    sigma_break = np.unique(np.asarray(breakpoints, dtype=float).ravel())
+    sigma_break = sigma_break[(sigma_break > 0.0) & (sigma_break < 1.0)]
+    ends = np.concatenate([[0.0], np.arccos(1.0 - 2.0 * sigma_break) / np.pi, [1.0]])
+    width = np.diff(ends)
+    share = np.maximum(1, np.floor(segments * width).astype(int))
+    # hand out what is left by the largest remainders, so that Σ share = max(N, pieces)
+    left = max(segments, width.size) - int(share.sum())
+    if left > 0:
+        remainder = segments * width - np.floor(segments * width)
+        share[np.argsort(-remainder, kind="stable")[:left]] += 1
+    x = np.concatenate(
+        [a + (b - a) * np.arange(k) / k for a, b, k in zip(ends[:-1], ends[1:], share, strict=True)]
+        + [[1.0]]
+    )
+    sigma = 0.5 * (1.0 - np.cos(np.pi * x))
+    sigma[np.cumsum(share)[:-1]] = sigma_break  # the breakpoints exactly, not via cos(arccos(·))
+    return sigma
