@@ -13,6 +13,7 @@ from .errors import (
     InfeasiblePathError,
     NearoptError,
     RobotNotFoundError,
+    SamplingWarning,
     SolverError,
     URDFError,
 )
@@ -20,7 +21,7 @@ from .path import BSplinePath, Path, SplinePath, StraightPath
 from .planner import Iteration, PlanResult, plan
 from .robot import JointLimits, PathCoefficients, Robot
 from .timing import TimingResult, optimal_timing
-from .trajectory import Trajectory
+from .trajectory import Samples, Trajectory
 from .verify import VerificationError, VerificationReport, verify
 
 __all__ = [
@@ -39,6 +40,7 @@ __all__ = [
     "Iteration",
     "TimingResult",
     "Trajectory",
+    "Samples",
     "verify",
     "VerificationReport",
     "VerificationError",
@@ -51,6 +53,7 @@ __all__ = [
     "ConfigurationError",
     "InfeasiblePathError",
     "SolverError",
+    "SamplingWarning",
 ]
 
 __version__ = "0.1.0"

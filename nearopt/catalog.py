@@ -53,6 +53,7 @@ _ERD_ARMS: dict[str, tuple[str, str, tuple[str, ...]]] = {
     "xarm7": ("xarm_description/urdf/xarm7.urdf", "link_eef", ()),
     "z1": ("z1_description/urdf/z1.urdf", "gripperStator", ("jointGripper",)),
     "kinova": ("kinova_description/robots/kinova.urdf", "j2s6s200_end_effector", ()),
+    "so101": ("so_arm_description/urdf/so101.urdf", "gripper_frame_link", ("gripper",)),
 }
 
 # name -> tip frame of the arms in robots/

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import sys
 import time
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -22,7 +23,7 @@ import numpy as np
 
 from .catalog import available_robots
 from .cost import Cost, TimeCost, TorqueCost
-from .errors import ConfigurationError, NearoptError
+from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .export import check_writable, csv_text, json_text, write_all
 from .planner import METHODS, plan
 from .robot import Robot
@@ -71,6 +72,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--max-iterations", type=int, default=200, help="iteration budget (200)")
     p.add_argument("--time-limit", type=float, default=300.0, help="wall-time budget [s] (300)")
     p.add_argument("--no-velocity-limits", action="store_true", help="ignore joint speed limits")
+    p.add_argument("--acceleration-limit", nargs="+", type=float, metavar="A",
+                   help="joint acceleration limits |qdd| <= A [rad/s²]: one value for every joint "
+                        "or one per joint (default: none)")
     p.add_argument("--no-position-limits", action="store_true",
                    help="ignore joint position limits")
     p.add_argument("--json", metavar="FILE", help="write the planned motion as JSON")
@@ -84,6 +88,18 @@ def _parser() -> argparse.ArgumentParser:
                    help="play it in the browser (meshcat server on 127.0.0.1) until Ctrl+C")
     p.add_argument("--quiet", action="store_true", help="no per-iteration output")
     return parser
+
+
+def _per_joint(values: list[float], robot: Robot, option: str) -> float | list[float]:
+    """One value for every joint, or one per joint."""
+    if len(values) == 1:
+        return values[0]
+    if len(values) != robot.n:
+        raise ConfigurationError(
+            f"{option} takes one value or one per joint of {robot.name} ({robot.n}: "
+            f"{', '.join(robot.joint_names)}), got {len(values)}"
+        )
+    return values
 
 
 def _cost(args: argparse.Namespace) -> Cost:
@@ -134,6 +150,9 @@ def _plan_command(args: argparse.Namespace) -> None:
         if args.robot
         else Robot.from_urdf(args.urdf, locked_joints=tuple(args.lock))
     )
+    if args.acceleration_limit is not None:
+        robot = robot.with_limits(acceleration=_per_joint(args.acceleration_limit, robot,
+                                                          "--acceleration-limit"))
     if args.weights is not None and len(args.weights) != robot.n:
         raise ConfigurationError(
             f"--weights needs one weight per joint of {robot.name} ({robot.n}), "
@@ -169,10 +188,14 @@ def _plan_command(args: argparse.Namespace) -> None:
     report.raise_if_failed()  # nothing is written for a motion that fails
     # everything is produced first, then written: a failure leaves no file behind
     contents: dict[Path, str | bytes] = {}
-    if "json" in targets:
-        contents[targets["json"]] = json_text(result, args.rate)
-    if "csv" in targets:
-        contents[targets["csv"]] = csv_text(result, args.rate)
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", SamplingWarning)
+        if "json" in targets:
+            contents[targets["json"]] = json_text(result, args.rate)
+        if "csv" in targets:
+            contents[targets["csv"]] = csv_text(result, args.rate)
+    for message in dict.fromkeys(str(w.message) for w in caught):
+        print(f"nearopt: warning: {message}", file=sys.stderr)
     if "html" in targets:
         from .viewer import plan_html
 

@@ -14,6 +14,7 @@ __all__ = [
     "ConfigurationError",
     "InfeasiblePathError",
     "SolverError",
+    "SamplingWarning",
 ]
 
 
@@ -118,3 +119,7 @@ class SolverError(NearoptError):
     def __init__(self, message: str, *, status: object = None) -> None:
         super().__init__(message)
         self.status = status
+
+
+class SamplingWarning(UserWarning):
+    """Samples of a motion at a rate too low to resolve it (a phase shorter than one period)."""

@@ -12,17 +12,19 @@ import io
 import json
 import os
 import tempfile
+import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import ConfigurationError
+from .errors import ConfigurationError, SamplingWarning
 
 if TYPE_CHECKING:
     from .planner import PlanResult
 
 __all__ = [
+    "check_sampling",
     "check_writable",
     "write_all",
     "write_atomically",
@@ -82,9 +84,28 @@ def write_atomically(path: str | Path, content: str | bytes) -> Path:
     return write_all({Path(path): content})[0]
 
 
+def check_sampling(result: PlanResult, rate: float) -> str | None:
+    """A warning (also issued as :class:`~nearopt.SamplingWarning`) if samples at ``rate`` [Hz]
+    can miss a constant-acceleration phase of the motion, else None."""
+    faithful = result.trajectory.faithful_rate()
+    if rate >= faithful:
+        return None
+    message = (
+        f"the motion has a constant-acceleration phase of {1e3 / faithful:.3g} ms, shorter than "
+        f"one sample period at {rate:g} Hz: the samples are not a faithful record of it (sample at "
+        f"≥ {faithful:.4g} Hz, or limit the joint accelerations)"
+    )
+    warnings.warn(message, SamplingWarning, stacklevel=3)
+    return message
+
+
 def json_text(result: PlanResult, rate: float = 1000.0) -> str:
     """The plan as ``{"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
-    "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists)."""
+    "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists).
+
+    Warns (:class:`~nearopt.SamplingWarning`) if the rate is too low to resolve the motion.
+    """
+    check_sampling(result, rate)
     samples = result.trajectory.sample(rate)
     document = {
         "robot": result.robot.name,
@@ -100,7 +121,11 @@ def json_text(result: PlanResult, rate: float = 1000.0) -> str:
 
 
 def csv_text(result: PlanResult, rate: float = 1000.0) -> str:
-    """The plan's samples as CSV: a header row ``t, q_<joint>…, qd_<joint>…, qdd_…, tau_…``."""
+    """The plan's samples as CSV: a header row ``t, q_<joint>…, qd_<joint>…, qdd_…, tau_…``.
+
+    Warns (:class:`~nearopt.SamplingWarning`) if the rate is too low to resolve the motion.
+    """
+    check_sampling(result, rate)
     samples = result.trajectory.sample(rate)
     names = result.robot.joint_names
     header = ["t"] + [f"{key}_{name}" for key in KEYS for name in names]

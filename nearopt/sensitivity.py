@@ -1,10 +1,10 @@
 """How stage 1's optimum J*(θ) changes with the path: the gradient that drives path optimisation.
 
 Stage 1 solves, on a grid σ_0 … σ_N, ``min_b Obj(b; θ)`` subject to the rows of
-:class:`~nearopt.timing.Discretisation` (torque and acceleration limits at the samples r, one speed
-row b θ'_i² ≤ v_i² per joint at the knots and inside segments). Its optimal value J*(θ) depends on
-the path only through the samples θ, θ', θ'' at those places. By the envelope theorem (sensitivity of
-a parametric program at a KKT point with unique multipliers),
+:class:`~nearopt.timing.Discretisation` (torque and acceleration limits at the samples r, one
+speed row b θ'_i² ≤ v_i² per joint at the knots and inside segments). Its optimal value J*(θ)
+depends on the path only through the samples θ, θ', θ'' at those places. By the envelope theorem
+(sensitivity of a parametric program at a KKT point with unique multipliers),
 
     dJ*/dp = ∂Obj/∂p + Σ_rows μ_row ∂row/∂p      at the optimum b*,
 

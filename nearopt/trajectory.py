@@ -158,22 +158,77 @@ class Trajectory:
         q, qd, qdd = self.states(t)
         return Samples(t, q, qd, qdd, self._inverse_dynamics(q, qd, qdd))
 
+    def phases(self, threshold: float = 0.1) -> NDArray[np.float64]:
+        """Durations of the motion's constant-acceleration phases [s], in order.
+
+        θ̈ varies smoothly inside every segment of the timing and jumps at its knots by
+        θ'·Δs̈. A phase ends where some joint's θ̈ jumps by more than ``threshold`` times that
+        joint's largest |θ̈| (a bang-bang switch, a speed limit reached); the small steps between
+        neighbouring segments of a smooth profile do not end one. Samples at a rate below
+        1 / min(phases) can miss a whole phase: they are then not a faithful record of the motion.
+        """
+        knots = self.t[1:-1]
+        if knots.size == 0:
+            return np.array([self.duration])
+        after = self.states(knots)[2]
+        before = self.states(knots - 1e-12 * max(1.0, self.duration))[2]
+        peak = np.maximum(np.max(np.abs(after), axis=0), np.max(np.abs(before), axis=0))
+        switch = np.any(np.abs(after - before) > threshold * peak, axis=1)
+        return np.diff(np.concatenate([[0.0], knots[switch], [self.duration]]))
+
+    def faithful_rate(self, threshold: float = 0.1) -> float:
+        """The sampling rate [Hz] below which samples can miss a phase: 1 / the shortest phase."""
+        return float(1.0 / np.min(self.phases(threshold)))
+
     def integrate(
-        self, f0: Callable[..., NDArray[np.float64]], points: int = 6
+        self, f0: Callable[..., NDArray[np.float64]], tolerance: float = 1e-10
     ) -> float:
-        """∫ f0(θ, θ̇, u) dt over the motion, by Gauss-Legendre quadrature on each segment.
+        """∫ f0(θ, θ̇, u) dt over the motion, by adaptive Gauss-Kronrod quadrature.
+
+        Every segment of the timing (where the motion is smooth) gets a 7/15-point Gauss-Kronrod
+        rule; intervals whose two estimates differ by more than their share of ``tolerance`` × |J|
+        are halved, up to 10 times.
 
         Parameters
         ----------
         f0
             A cost: called with θ, θ̇, u of shape (M, n), returns shape (M,).
-        points
-            Quadrature points per segment (exact for polynomials of degree 2·points − 1 in τ).
+        tolerance
+            Relative accuracy asked of the integral.
         """
-        x, w = np.polynomial.legendre.leggauss(points)
-        dt = np.diff(self.t)
-        t = (self.t[:-1, None] + 0.5 * dt[:, None] * (x[None, :] + 1.0)).ravel()
-        # the right-continuous evaluation picks the segment each node lies in (nodes are interior)
-        q, qd, qdd = self.states(t)
-        values = np.asarray(f0(q, qd, self._inverse_dynamics(q, qd, qdd))).reshape(dt.size, points)
-        return float(np.sum(0.5 * dt * (values @ w)))
+        lo, hi = self.t[:-1], self.t[1:]
+        total = 0.0
+        for level in range(11):
+            half = 0.5 * (hi - lo)
+            # the right-continuous evaluation picks the segment each node lies in (nodes are
+            # interior to the intervals, which lie within segments)
+            t = ((lo + hi)[:, None] * 0.5 + half[:, None] * _KRONROD_X[None, :]).ravel()
+            q, qd, qdd = self.states(t)
+            f = np.asarray(f0(q, qd, self._inverse_dynamics(q, qd, qdd))).reshape(lo.size, -1)
+            kronrod = half * (f @ _KRONROD_W)
+            error = np.abs(kronrod - half * (f @ _GAUSS_W))
+            scale = abs(total + np.sum(kronrod))
+            bad = error > tolerance * max(scale, 1e-300) / max(1, lo.size)
+            total += float(np.sum(kronrod[~bad]))
+            if not np.any(bad) or level == 10:
+                return total + float(np.sum(kronrod[bad]))
+            mid = 0.5 * (lo[bad] + hi[bad])
+            lo, hi = np.concatenate([lo[bad], mid]), np.concatenate([mid, hi[bad]])
+        return total
+
+
+# Gauss-Kronrod 7/15 on [-1, 1] (QUADPACK's qk15): Kronrod nodes and weights, and the weights of
+# the 7-point Gauss rule on its nodes (every second Kronrod node)
+_X = np.array([0.991455371120812639206854697526329, 0.949107912342758524526189684047851,
+               0.864864423359769072789712788640926, 0.741531185599394439863864773280788,
+               0.586087235467691130294144845693013, 0.405845151377397166906606412076961,
+               0.207784955007898467600689403773245, 0.0])
+_WK = np.array([0.022935322010529224963732008058970, 0.063092092629978553290700663189204,
+                0.104790010322250183839876322541518, 0.140653259715525918745189590510238,
+                0.169004726639267902826583426598550, 0.190350578064785409913256402421014,
+                0.204432940075298892414161999234649, 0.209482141084727828012999174891714])
+_WG = np.array([0.0, 0.129484966168869693270611432679082, 0.0, 0.279705391489276667901467771423780,
+                0.0, 0.381830050505118944950369775488975, 0.0, 0.417959183673469387755102040816327])
+_KRONROD_X = np.concatenate([-_X[:-1], _X[::-1]])
+_KRONROD_W = np.concatenate([_WK[:-1], _WK[::-1]])
+_GAUSS_W = np.concatenate([_WG[:-1], _WG[::-1]])

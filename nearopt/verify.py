@@ -138,6 +138,7 @@ def verify(
     cost_tolerance: float = 1e-4,
     simulation_tolerance: float = 1e-5,
     window: float = 0.25,
+    simulate: bool = True,
 ) -> VerificationReport:
     """Check a motion at a controller rate, from the robot model alone.
 
@@ -152,16 +153,18 @@ def verify(
     q0, qe
         Expected start and goal [rad]; default: the motion's own ends (then only rest is checked).
     cost, J
-        If both are given, J is recomputed as ∫ f0 dt by the trapezoidal rule on samples at
-        max(rate, 20 kHz) and on both sides of every time where the motion's acceleration jumps
-        (the trajectory's knot times: the rule is second-order between them, first-order across
-        a jump), and compared with ``J`` (relative ``cost_tolerance``).
+        If both are given, J is recomputed as ∫ f0 dt by Simpson's rule on samples at least at
+        max(rate, 20 kHz), composite on every interval between the times where the motion's
+        acceleration jumps (the trajectory's knot times: across a jump any rule is first-order),
+        and compared with ``J`` (relative ``cost_tolerance``).
     velocity_limits, position_limits
         Check the robot's joint speed / position limits.
     torque_tolerance
         Largest acceptable torque beyond a limit, relative to max(|u_min|, |u_max|).
     limit_tolerance
-        Largest acceptable speed beyond a limit (relative) and position beyond a limit [rad].
+        Largest acceptable speed or acceleration beyond a limit (relative) and position beyond a
+        limit [rad]. Joint acceleration limits are checked when the robot has any
+        (:meth:`~nearopt.Robot.with_limits`).
     end_tolerance
         Largest acceptable |θ(0) − θ0|, |θ(t_e) − θe| [rad] and end speed [rad/s].
     cost_tolerance
@@ -174,6 +177,9 @@ def verify(
         integration amplifies any error at the rate of the arm's unstable (gravity) modes, so over
         seconds it would measure that instability, not the motion. The largest mismatch at the end
         of a window is reported as the simulation defect.
+    simulate
+        Run the forward simulation (the slowest check); without it, the report holds the checks
+        of the samples only.
 
     Raises
     ------
@@ -205,6 +211,11 @@ def verify(
         worst = np.unravel_index(np.argmax(excess), excess.shape)
         checks.append(Check("joint position limits", float(excess[worst]), limit_tolerance,
                             "rad", _where(t, names, worst)))
+    if np.any(np.isfinite(lim.acceleration)):
+        excess = _excess(qdd, -lim.acceleration, lim.acceleration, lim.acceleration)
+        worst = np.unravel_index(np.argmax(excess), excess.shape)
+        checks.append(Check("joint acceleration limits", float(excess[worst]), limit_tolerance,
+                            "relative", _where(t, names, worst)))
     start = q[0] if q0 is None else robot.check_configuration(q0, "q0")
     goal = q[-1] if qe is None else robot.check_configuration(qe, "qe")
     ends = np.abs(np.vstack([q[0] - start, q[-1] - goal]))
@@ -216,18 +227,18 @@ def verify(
     checks.append(Check("rest at both ends", float(rest[k, i]), end_tolerance, "rad/s",
                         f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}"))
     if cost is not None and J is not None:
-        fine = trajectory.sample(max(rate, 20000.0)).t
-        knots = trajectory.t[1:-1]
-        tf = np.sort(np.concatenate([fine, knots, knots - 1e-12 * max(1.0, trajectory.duration)]))
+        tf, weight = _simpson_nodes(trajectory.t, max(rate, 20000.0))
         qf, qdf, qddf = trajectory.states(tf)
         uf = np.array([
             pin.rnea(model, data, *x) + robot.damping * x[1]
             for x in zip(qf, qdf, qddf, strict=True)
         ])
-        recomputed = float(np.trapezoid(cost(qf, qdf, uf), tf))
+        recomputed = float(weight @ cost(qf, qdf, uf))
         checks.append(Check("J recomputed", abs(recomputed - J) / max(abs(J), 1e-12),
                             cost_tolerance, "relative",
                             f"(∫ f0 dt = {recomputed:.8g}, J = {J:.8g})"))
+    if not simulate:
+        return VerificationReport(tuple(checks), float(rate), int(t.size))
     x_end, defect = _simulate(robot, trajectory, window)
     checks.append(Check("simulated end position", float(np.max(np.abs(x_end[:n] - goal))),
                         simulation_tolerance, "rad", "forward simulation of u(t) with ABA"))
@@ -236,6 +247,25 @@ def verify(
     checks.append(Check("simulation window defect", defect, 10 * simulation_tolerance,
                         "rad or rad/s", f"largest mismatch at the end of a {window:g} s window"))
     return VerificationReport(tuple(checks), float(rate), int(t.size))
+
+
+def _simpson_nodes(
+    knots: NDArray[np.float64], rate: float
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Nodes and weights of composite Simpson rules on every interval between ``knots`` [s], with
+    an even number of steps no longer than 1/rate; nodes at an interval's end are taken just
+    inside it (the acceleration jumps at the knots)."""
+    dt = np.diff(knots)
+    steps = 2 * np.maximum(1, np.ceil(dt * rate / 2.0)).astype(int)
+    seg = np.repeat(np.arange(dt.size), steps + 1)
+    j = np.arange(seg.size) - np.repeat(np.cumsum(steps + 1) - (steps + 1), steps + 1)
+    m = steps[seg]
+    frac = j / m
+    nodes = knots[seg] + dt[seg] * frac
+    inside = 1e-12 * max(1.0, float(knots[-1]))
+    nodes = np.where(j == m, knots[seg + 1] - inside, nodes)
+    simpson = np.where((j == 0) | (j == m), 1.0, np.where(j % 2 == 1, 4.0, 2.0))
+    return nodes, simpson * dt[seg] / (3.0 * m)
 
 
 def _simulate(

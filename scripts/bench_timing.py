@@ -2,9 +2,10 @@
 
 For two_link (the paper's line), ur5 and panda (a seeded random line), prints N, the median solve
 time of repeats, J for the paper's cost and, for the time-optimal case, TOPP-RA's duration and
-time on the same grid with the ratios.
+time on the same grid with the ratios; then the same with joint acceleration limits (``--accel``
+rad/s² on every joint; TOPP-RA's ``JointAccelerationConstraint``).
 
-    python scripts/bench_timing.py [--grids 100 200 400] [--repeat 5]
+    python scripts/bench_timing.py [--grids 100 200 400] [--repeat 5] [--accel 10]
 """
 
 from __future__ import annotations
@@ -30,6 +31,7 @@ def line(robot: nearopt.Robot) -> nearopt.StraightPath:
 
 
 def toppra_duration(robot: nearopt.Robot, path: nearopt.StraightPath, grid: int) -> float:
+    """TOPP-RA's time-optimal duration [s] with the same limits, on nearopt's knots."""
     data = robot.model.createData()
     lim = robot.limits
     spline = ta.SplineInterpolator([0.0, 1.0], np.vstack([path(0.0)[0], path(1.0)[0]]))
@@ -42,6 +44,11 @@ def toppra_duration(robot: nearopt.Robot, path: nearopt.StraightPath, grid: int)
             discretization_scheme=ta.constraint.DiscretizationType.Interpolation,
         ),
     ]
+    if np.any(np.isfinite(lim.acceleration)):
+        constraints.append(ta.constraint.JointAccelerationConstraint(
+            np.column_stack([-lim.acceleration, lim.acceleration]),
+            discretization_scheme=ta.constraint.DiscretizationType.Interpolation,
+        ))
     # the same knots as nearopt's stage 1 (clustered at the rest ends)
     knots = nearopt.timing.build_timing_problem(robot, path, grid=grid).sigma
     algo = ta.algorithm.TOPPRA(constraints, spline, gridpoints=knots)
@@ -53,11 +60,20 @@ def main() -> None:
     parser.add_argument("--robots", nargs="+", default=["two_link", "ur5", "panda"])
     parser.add_argument("--grids", nargs="+", type=int, default=[100, 200, 400])
     parser.add_argument("--repeat", type=int, default=5)
+    parser.add_argument("--accel", type=float, default=10.0,
+                        help="joint acceleration limit of the second table [rad/s²]")
     args = parser.parse_args()
+    for accel in (np.inf, args.accel):
+        table(args, accel)
+
+
+def table(args: argparse.Namespace, accel: float) -> None:
+    """One table: every robot and grid, with the acceleration limit ``accel`` on every joint."""
+    print(f"\njoint acceleration limits: {accel:g} rad/s²")
     print(f"{'robot':<10}{'N':>5}{'J(β=0.03)':>12}{'t [ms]':>9}{'te ours':>10}{'t [ms]':>9}"
           f"{'te TOPP-RA':>12}{'t [ms]':>9}{'te ratio':>10}{'time ratio':>11}")
     for name in args.robots:
-        robot = nearopt.Robot.from_name(name)
+        robot = nearopt.Robot.from_name(name).with_limits(acceleration=accel)
         path = line(robot)
         for grid in args.grids:
             t_j, res_j = median_time(

@@ -91,7 +91,7 @@ CASES = {
     "unknown robot name": Case(
         lambda p: nearopt.Robot.from_name("ur10"),
         lambda p: ["--robot", "ur10", *PAPER],
-        RobotNotFoundError, "known robots: two_link, kinova, panda, ur5, xarm7, z1"),
+        RobotNotFoundError, "known robots: two_link, kinova, panda, so101, ur5, xarm7, z1"),
     "q0 of the wrong length": Case(
         lambda p: plan([0.1], GOOD[1]),
         lambda p: ["--robot", "two_link", "--q0", "0.1", "--qe", "1", "1"],

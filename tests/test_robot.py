@@ -13,15 +13,15 @@ from conftest import load, random_configuration
 import nearopt
 
 # ---------------------------------------------------------------- the paper's arm, eq. (31)
-M, L, I, G = 1.0, 0.1, 4.167e-3, 9.81
+M, L, INERTIA, G = 1.0, 0.1, 4.167e-3, 9.81
 
 
 def eq31(q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """H, h, g of the paper's two-link arm in closed form (eq. 31)."""
     c2, s2 = np.cos(q[1]), np.sin(q[1])
-    h11 = 2 * I + 2 * M * L**2 * (3 + 2 * c2)
-    h12 = I + M * L**2 * (1 + 2 * c2)
-    h22 = I + M * L**2
+    h11 = 2 * INERTIA + 2 * M * L**2 * (3 + 2 * c2)
+    h12 = INERTIA + M * L**2 * (1 + 2 * c2)
+    h22 = INERTIA + M * L**2
     hmat = np.array([[h11, h12], [h12, h22]])
     h = np.array(
         [
@@ -67,11 +67,11 @@ def _finite_difference_jacobians(
     for j in range(2 * n):
         dx = np.zeros(2 * n)
         dx[j] = eps
-        a[:, j] = (robot.state_derivative(x + dx, u) - robot.state_derivative(x - dx, u)) / (2 * eps)
+        a[:, j] = (robot.state_derivative(x + dx, u) - robot.state_derivative(x - dx, u)) / 2 / eps
     for j in range(n):
         du = np.zeros(n)
         du[j] = eps
-        b[:, j] = (robot.state_derivative(x, u + du) - robot.state_derivative(x, u - du)) / (2 * eps)
+        b[:, j] = (robot.state_derivative(x, u + du) - robot.state_derivative(x, u - du)) / 2 / eps
     return a, b
 
 
@@ -154,7 +154,8 @@ def _yourdfpy(robot: nearopt.Robot) -> yourdfpy.URDF:
 def test_yourdfpy_agrees_on_joints_and_limits(robot: nearopt.Robot) -> None:
     urdf = _yourdfpy(robot)
     moving = [j for j in urdf.actuated_joint_names if j not in robot.locked_joints]
-    assert robot.joint_names == moving
+    # the same joints (Pinocchio orders them along the tree, yourdfpy as in the file)
+    assert sorted(robot.joint_names) == sorted(moving)
     lim = robot.limits
     for i, name in enumerate(robot.joint_names):
         joint = urdf.joint_map[name]

@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 from checks import assert_independent_checks
 from conftest import ROBOT_NAMES, load, random_configuration
+from urdfs import chain_locks, erd_urdf
 
 import nearopt
 from nearopt.cost import CallableCost, TimeCost, TorqueCost
@@ -15,6 +16,7 @@ from nearopt.timing import (
     TORQUE_SAFETY,
     PathQuantity,
     TimingProblem,
+    build_timing_problem,
     optimal_timing,
     solve_timing,
 )
@@ -68,7 +70,7 @@ def casadi_reference(big_n: int = 1000) -> float:
     (midpoint rather than segment-end torques) and of its solver (IPOPT rather than Clarabel).
     """
     ca = pytest.importorskip("casadi")
-    m, l, inertia, g = 1.0, 0.1, 4.167e-3, 9.81
+    m, half, inertia, g = 1.0, 0.1, 4.167e-3, 9.81
     d_theta = THETA_E - THETA_0
     ds = 1.0 / big_n
     opti = ca.Opti()
@@ -85,14 +87,14 @@ def casadi_reference(big_n: int = 1000) -> float:
         qd2 = d_theta  # θ' (θ'' = 0 on a line)
         qdd = qd2 * a
         c2, s2 = np.cos(q[1]), np.sin(q[1])
-        h11 = 2 * inertia + 2 * m * l**2 * (3 + 2 * c2)
-        h12 = inertia + m * l**2 * (1 + 2 * c2)
-        h22 = inertia + m * l**2
+        h11 = 2 * inertia + 2 * m * half**2 * (3 + 2 * c2)
+        h12 = inertia + m * half**2 * (1 + 2 * c2)
+        h22 = inertia + m * half**2
         u1 = (h11 * qdd[0] + h12 * qdd[1]
-              - 2 * m * l**2 * s2 * (2 * qd2[0] * qd2[1] + qd2[1] ** 2) * bm
-              - m * g * l * (3 * np.sin(q[0]) + np.sin(q[0] + q[1])))
-        u2 = (h12 * qdd[0] + h22 * qdd[1] + 2 * m * l**2 * s2 * qd2[0] ** 2 * bm
-              - m * g * l * np.sin(q[0] + q[1]))
+              - 2 * m * half**2 * s2 * (2 * qd2[0] * qd2[1] + qd2[1] ** 2) * bm
+              - m * g * half * (3 * np.sin(q[0]) + np.sin(q[0] + q[1])))
+        u2 = (h12 * qdd[0] + h22 * qdd[1] + 2 * m * half**2 * s2 * qd2[0] ** 2 * bm
+              - m * g * half * np.sin(q[0] + q[1]))
         opti.subject_to(opti.bounded(-10, u1, 10))
         opti.subject_to(opti.bounded(-5, u2, 5))
         cost += dt * (1 + 0.03 * (u1**2 + u2**2))
@@ -219,3 +221,122 @@ def test_gravity_beyond_a_limit_between_knots_is_infeasible_too() -> None:
         optimal_timing(robot, path, grid=21)
     assert info.value.joint == "joint1"
     assert abs(path(info.value.s)[0][0] - np.pi / 2) < 0.1
+
+
+# ------------------------------------------------------------------ limits at all times
+def random_path(robot: nearopt.Robot, rng: np.random.Generator, kind: str) -> nearopt.Path:
+    """A random path between random configurations: the line, a spline through waypoints off the
+    line, or a B-spline with control points off the line (by up to a quarter of the motion)."""
+    q0, qe = random_configuration(robot, rng), random_configuration(robot, rng)
+    if kind == "straight":
+        return StraightPath(q0, qe)
+    count = int(rng.integers(3, 9))
+    at = np.linspace(0.0, 1.0, count + 2)
+    if kind == "bspline":
+        at = nearopt.BSplinePath.greville(count + 2)
+    points = q0 + np.outer(at, qe - q0)
+    points[1:-1] += rng.normal(scale=0.25, size=(count, robot.n)) * np.abs(qe - q0)
+    if kind == "spline":
+        return nearopt.SplinePath(at, points)
+    return nearopt.BSplinePath(points)
+
+
+@pytest.mark.parametrize("name", ["two_link", "ur5", "panda"])
+def test_limits_hold_between_samples_on_random_paths(name: str) -> None:
+    """36 seeded paths per arm (lines, splines, B-splines; grids of 40 to 200 segments; time and
+    torque costs; with and without acceleration limits): torques by RNEA, speeds and accelerations
+    on 20 kHz samples stay within the limits (verify's 1e-6 / 1e-9 relative)."""
+    robot = load(name)
+    rng = np.random.default_rng([36, ROBOT_NAMES.index(name)])
+    timed = 0
+    for k in range(36):
+        kind = ("straight", "spline", "bspline")[k % 3]
+        cost = (TimeCost(), PAPER_COST)[(k // 3) % 2]
+        arm = robot.with_limits(acceleration=20.0) if k % 4 == 3 else robot
+        path = random_path(robot, rng, kind)
+        try:
+            result = optimal_timing(arm, path, cost, grid=(40, 100, 200)[(k // 6) % 3])
+        except nearopt.InfeasiblePathError:  # gravity beyond a limit somewhere on the path
+            continue
+        timed += 1
+        # (a given path may leave the position limits: stage 1 times it as it is)
+        report = nearopt.verify(result.trajectory, arm, rate=20000.0, cost=cost, J=result.J,
+                                position_limits=False, simulate=False)
+        assert report.passed, f"path {k} ({kind}): {report}"
+    assert timed >= 24, timed
+
+
+def test_the_reported_excesses_are_gone() -> None:
+    """The motions that broke a limit between samples: the two-link arm from θ1 = 2π, the
+    double pendulum with effort 2 and tiago's arm plan and verify."""
+    two_link = load("two_link")
+    double_pendulum = nearopt.Robot.from_urdf(
+        erd_urdf("double_pendulum_description/urdf/double_pendulum.urdf"), effort_limit=2.0
+    )
+    tiago_urdf = erd_urdf("tiago_description/robots/tiago.urdf")
+    tiago = nearopt.Robot.from_urdf(tiago_urdf, locked_joints=chain_locks(tiago_urdf,
+                                                                          "arm_7_link"))
+    cases = [
+        (two_link, [2 * np.pi, 0.0], [0.0, 1.0], TimeCost()),
+        (double_pendulum, [0.3, -0.4], [2.0, 1.0], TimeCost()),
+        (tiago, tiago_pose(tiago, 0.3), tiago_pose(tiago, 0.7), PAPER_COST),
+    ]
+    for robot, q0, qe, cost in cases:
+        result = nearopt.plan(robot, q0, qe, cost, grid=100, max_iterations=5)
+        report = nearopt.verify(result.trajectory, robot, rate=20000.0, q0=q0, qe=qe, cost=cost,
+                                J=result.J)
+        assert report.passed, f"{robot.name}: {report}"
+
+
+def tiago_pose(robot: nearopt.Robot, fraction: float) -> np.ndarray:
+    lo, hi = robot.limits.position_lower, robot.limits.position_upper
+    return lo + fraction * (hi - lo)
+
+
+# ------------------------------------------------------------------ joint acceleration limits
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_time_optimal_with_acceleration_limits_matches_toppra(name: str) -> None:
+    ta = pytest.importorskip("toppra")
+    import pinocchio as pin
+
+    robot = load(name).with_limits(acceleration=8.0)
+    path = random_line(robot, seed=11)
+    ours = optimal_timing(robot, path, TimeCost(), grid=200)
+    data = robot.model.createData()
+    lim = robot.limits
+    spline = ta.SplineInterpolator([0.0, 1.0], np.vstack([path(0.0)[0], path(1.0)[0]]))
+    scheme = ta.constraint.DiscretizationType.Interpolation
+    constraints = [
+        ta.constraint.JointVelocityConstraint(np.column_stack([-lim.velocity, lim.velocity])),
+        ta.constraint.JointAccelerationConstraint(
+            np.column_stack([-lim.acceleration, lim.acceleration]), discretization_scheme=scheme
+        ),
+        ta.constraint.JointTorqueConstraint(
+            lambda q, qd, qdd: pin.rnea(robot.model, data, q, qd, qdd) + robot.damping * qd,
+            np.column_stack([lim.effort_lower, lim.effort_upper]),
+            np.zeros(robot.n),
+            discretization_scheme=scheme,
+        ),
+    ]
+    knots = build_timing_problem(robot, path, grid=200).sigma
+    theirs = ta.algorithm.TOPPRA(constraints, spline, gridpoints=knots).compute_trajectory(0, 0)
+    assert abs(ours.duration - theirs.duration) / theirs.duration < 1e-4
+    # and the limit binds: without it the motion is faster
+    assert optimal_timing(load(name), path, TimeCost(), grid=200).duration < ours.duration
+
+
+def test_samples_too_coarse_for_a_phase_are_flagged() -> None:
+    """so101 time-optimally has bang phases under 1 ms: 1 kHz samples miss them (a
+    SamplingWarning); with acceleration limits every phase is longer than a sample period."""
+    from nearopt.export import check_sampling, json_text
+
+    robot = load("so101")
+    q0, qe = tiago_pose(robot, 0.3), tiago_pose(robot, 0.7)
+    fast = nearopt.plan(robot, q0, qe, TimeCost(), max_iterations=0)
+    assert fast.trajectory.faithful_rate() > 1000.0
+    with pytest.warns(nearopt.SamplingWarning, match="shorter than one sample period"):
+        json_text(fast, 1000.0)
+    limited = nearopt.plan(robot.with_limits(acceleration=20.0), q0, qe, TimeCost(),
+                           max_iterations=0)
+    assert limited.trajectory.faithful_rate() < 1000.0
+    assert check_sampling(limited, 1000.0) is None

@@ -35,3 +35,24 @@ def write_urdf(
     path = tmp_path / "chain.urdf"
     path.write_text("\n".join(parts))
     return path
+
+
+def erd_urdf(relative: str) -> Path:
+    """A URDF of example-robot-data, by its path below the package's ``robots/`` folder."""
+    from nearopt.catalog import package_dirs
+
+    return package_dirs()[0] / "example-robot-data" / "robots" / relative
+
+
+def chain_locks(urdf: Path, tip: str) -> list[str]:
+    """The moving joints of a URDF that are not on the chain from its root to ``tip``."""
+    import xml.etree.ElementTree as ET
+
+    joints = ET.parse(urdf).getroot().findall("joint")
+    parent_joint = {j.find("child").get("link"): j for j in joints}
+    chain, link = set(), tip
+    while link in parent_joint:
+        chain.add(parent_joint[link].get("name"))
+        link = parent_joint[link].find("parent").get("link")
+    moving = [j.get("name") for j in joints if j.get("type") != "fixed"]
+    return [name for name in moving if name not in chain]

@@ -18,8 +18,9 @@ in blocks (:class:`RowBlocks`):
 * interior speed: ((1 − w) b_k + w b_{k+1}) θ'_i(σ_p)² ≤ v_i² at points inside segments, where the
   knots' own rows do not imply it.
 
-The LP, SOCP and NLP back ends read these rows (:meth:`Discretisation.linear_rows`), and so does
-the stage-1 sensitivity (which differentiates each row with respect to the path).
+The SOCP and NLP back ends read these rows (:meth:`Discretisation.solver_rows`, the same rows
+with the redundant speed rows of a fixed path left out), and so do the stage-1 sensitivity and
+stage 2 (which differentiate each row with respect to the path).
 """
 
 from __future__ import annotations
@@ -84,6 +85,8 @@ class Discretisation:
         interior point p (interior speed), shape (R,).
     z_upper
         Upper bounds on z from ``problem.b_upper`` (inf where none), shape (N−1,).
+    z_cap
+        ``z_upper`` and the knots' speed rows as bounds on z, shape (N−1,).
     has_damping
         Whether any row has a √b term.
     """
@@ -118,6 +121,30 @@ class Discretisation:
         self._free = self.matrix[:, 1:-1].tocsc()
         b_upper = np.full(big_n + 1, np.inf) if p.b_upper is None else p.b_upper
         self.z_upper = np.asarray(b_upper[1:-1], dtype=float)
+        self._reduce()
+
+    def _reduce(self) -> None:
+        """For a fixed path the speed rows of different joints at one place are proportional:
+        keep the tightest inside segments, and turn those at the knots into bounds on z."""
+        knots = self.blocks.speed
+        cap = self.z_upper.copy()
+        if knots.stop > knots.start:
+            coef = self.matrix[knots].tocsr()
+            col = coef.indices - 1  # one entry per row: the knot's b
+            np.minimum.at(cap, col, self.upper[knots] / coef.data)
+        self.z_cap = cap
+        inside = np.arange(self.blocks.interior_speed.start, self.blocks.interior_speed.stop)
+        keep = np.ones(inside.size, dtype=bool)
+        if inside.size:
+            scale = np.asarray(abs(self.matrix[inside]).sum(axis=1)).ravel()  # θ'_i² here
+            bound = self.upper[inside] / scale
+            order = np.lexsort((bound, self.location[inside]))
+            first = np.r_[True, np.diff(self.location[inside][order]) != 0]
+            keep = np.zeros(inside.size, dtype=bool)
+            keep[order[first]] = True
+        self._solver_rows = np.concatenate(
+            [np.arange(self.blocks.speed.start), inside[keep]]
+        )
 
     # ---------------------------------------------------------------- building the rows
     def _samples(self, quantity: PathQuantity, keep_all: bool = False) -> tuple | None:
@@ -209,6 +236,13 @@ class Discretisation:
         value = self.values(z)
         return float(max(np.max(value - self.upper), np.max(self.lower - value)))
 
+    def relative_excess(self, z: NDArray[np.float64]) -> float:
+        """The largest violation of any row relative to its range (or bound, one-sided rows)."""
+        value = self.values(z)
+        span = np.where(np.isfinite(self.lower), self.upper - self.lower, np.abs(self.upper))
+        excess = np.maximum(value - self.upper, self.lower - value) / np.maximum(span, 1e-300)
+        return float(np.max(excess))
+
     def torque(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """All torque samples, joint-major (row i·2N + r), shape (n·2N,)."""
         return self.values(z)[self.blocks.torque] if self.blocks.torque.stop else np.zeros(0)
@@ -222,6 +256,16 @@ class Discretisation:
             matrix = (matrix + jac).tocsc()
             const = const + value - jac @ z_lin
         return LinearRows(matrix.tocsr(), self.lower - const, self.upper - const)
+
+    def solver_rows(
+        self, z_lin: NDArray[np.float64] | None
+    ) -> tuple[LinearRows, NDArray[np.float64]]:
+        """:meth:`linear_rows` reduced for a solver of this fixed path: the torque and
+        acceleration rows, the tightest speed row at each point inside a segment, and upper
+        bounds on z (from the knots' speed rows and ``problem.b_upper``)."""
+        rows = self.linear_rows(z_lin)
+        keep = self._solver_rows
+        return LinearRows(rows.matrix[keep], rows.lower[keep], rows.upper[keep]), self.z_cap
 
     def jacobian(self, z: NDArray[np.float64]) -> sp.csr_matrix:
         """∂(rows)/∂z at z, sparse (R, N−1)."""

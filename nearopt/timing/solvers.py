@@ -1,4 +1,4 @@
-"""The solver back ends of stage 1: HiGHS LPs, Clarabel's SOCP and SciPy's trust-constr.
+"""The solver back ends of stage 1: Clarabel's SOCP and SciPy's trust-constr.
 
 :func:`solve_timing` chooses among them by the cost and the damping (see :mod:`nearopt.timing`);
 every back end reads the same rows, those of :class:`~nearopt.timing.Discretisation`.
@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.optimize import Bounds, LinearConstraint, NonlinearConstraint, linprog, minimize
+from scipy.optimize import Bounds, LinearConstraint, NonlinearConstraint, minimize
 
 from ..cost import Cost, TimeCost, TorqueCost
 from ..errors import SolverError
@@ -51,7 +51,6 @@ class TimingMethod(StrEnum):
     """The back end that produced a timing."""
 
     SOCP = "Clarabel SOCP"
-    LP = "HiGHS LP"
     NLP = "SciPy trust-constr"
 
 
@@ -111,68 +110,47 @@ def solve_timing(
     InfeasiblePathError
         If gravity alone exceeds a torque limit somewhere on the path.
     SolverError
-        If HiGHS fails (it should not on a feasible problem).
+        If Clarabel fails (it should not on a feasible problem).
     """
     check_gravity(problem)
     disc = Discretisation(problem)
-    weights = cost.torque_weights(problem.dof) if isinstance(cost, TorqueCost) else None
-    if weights is not None and not disc.has_damping:
-        # no linearisation point needed
-        return _solve_convex(disc, cost, weights, None, tolerance, time_limit)
-    z_max, rounds = _greatest_profile(disc)
-    z_max = into_limits(disc, z_max)
-    if np.any(z_max <= 0):
-        raise SolverError("stage 1 found no positive speed profile although gravity is feasible")
-    if weights is not None and not np.any(weights):
-        # f0 = 1: certify the greatest profile by the KKT conditions of min Σ Δt (an LP in the
-        # descent direction: no feasible z decreases the linearised time).
-        _, grad = disc.objective(z_max, TimeCost())
-        _, best = _lp(disc, grad, z_max)
-        here = float(grad @ z_max)
-        if here - best <= 1e-9 * abs(here):
-            return TimingSolution(
-                b=disc.b(z_max),
-                objective=float(np.sum(disc.segment_times(z_max))),
-                status=TimingStatus.OPTIMAL,
-                solver=TimingMethod.LP,
-                iterations=rounds + 1,
-                message="greatest feasible speed profile; KKT conditions certified by an LP",
-            )
-    if weights is not None:
-        return _solve_convex(disc, cost, weights, z_max, tolerance, time_limit)
-    return _solve_nlp(disc, cost, z_max, tolerance, max_iterations)
+    if isinstance(cost, TorqueCost):
+        return _solve_convex(disc, cost, cost.torque_weights(problem.dof), tolerance, time_limit)
+    # any other f0: a local NLP from inside the time-optimal profile
+    fastest = _solve_convex(disc, TimeCost(), np.zeros(problem.dof), tolerance, time_limit)
+    return _solve_nlp(disc, cost, fastest.b[1:-1], tolerance, max_iterations)
 
 
 def _solve_convex(
     disc: Discretisation,
     cost: Cost,
     weights: NDArray[np.float64],
-    z_max: NDArray[np.float64] | None,
     tolerance: float,
     time_limit: float = np.inf,
 ) -> TimingSolution:
     """f0 = 1 + Σ w u²: the SOCP, repeated with the damping re-linearised until a fixed point.
 
-    ``z_max`` (the greatest profile) is the first linearisation point; None without damping.
+    The first solve leaves the damping torque out; every further one takes its tangent at the
+    previous answer, exact at the fixed point.
     """
     solutions = []
     torque_rows = disc.blocks.torque
 
     def socp(z_lin: NDArray[np.float64]) -> NDArray[np.float64]:
-        rows = disc.linear_rows(z_lin)
+        rows, z_upper = disc.solver_rows(z_lin)
         const = disc.upper[torque_rows] - rows.upper[torque_rows]  # the torque's constant part
         torque = (rows.matrix[torque_rows], const)
         # Clarabel may stop short of a 1e-9 gap ("InsufficientProgress") on badly scaled paths:
         # then the same problem is solved to 10 and 100 times looser tolerances
         for tol in (tolerance, 10.0 * tolerance, 100.0 * tolerance):
-            sol = solve_conic(disc.ds, weights, rows, torque, disc.z_upper, tolerance=tol,
+            sol = solve_conic(disc.ds, weights, rows, torque, z_upper, tolerance=tol,
                               time_limit=time_limit)
             if is_solved(sol.status):
                 break
         solutions.append(sol)
         return sol.z
 
-    z, rounds = _relinearise(disc, socp, socp(z_max), tolerance=1e-7, max_rounds=30)
+    z, rounds = _relinearise(disc, socp, socp(None), tolerance=1e-7, max_rounds=30)
     iterations = sum(sol.iterations for sol in solutions)
     status = solutions[-1].status
     if not is_solved(status):
@@ -196,13 +174,14 @@ def _solve_nlp(
     tolerance: float,
     max_iterations: int,
 ) -> TimingSolution:
-    """Any f0: SciPy's trust-constr interior-point method (a local optimum), from 0.7 b_max."""
+    """Any f0: SciPy's trust-constr interior-point method (a local optimum), from 0.7 times the
+    time-optimal profile ``z_max``."""
     # scale the cost to O(1) at the start and every two-sided row by its range
     x0 = 0.7 * z_max  # strictly inside: u(0.7 b) = g + 0.7 (u(b) − g)
     j_scale = 1.0 / disc.objective(x0, cost)[0]
     span = disc.upper - disc.lower
     row = np.where(np.isfinite(span), 2.0 / np.where(np.isfinite(span), span, 1.0), 1.0)
-    ub = disc.z_upper
+    ub = disc.z_cap
     lb = np.full(ub.size, 1e-10)
 
     def fun(x: NDArray[np.float64]) -> tuple[float, NDArray[np.float64]]:
@@ -263,29 +242,6 @@ def _solve_nlp(
     )
 
 
-def _lp(
-    disc: Discretisation, c: NDArray[np.float64], z_lin: NDArray[np.float64] | None = None
-) -> tuple[NDArray[np.float64], float]:
-    """minimise c·z over the rows' polytope with HiGHS.
-
-    The damping torque d·√b is linearised at ``z_lin`` (tangent, exact at z_lin), or left out
-    when ``z_lin`` is None (to find a first profile to linearise at).
-    """
-    rows = disc.linear_rows(z_lin)
-    up, lo = np.isfinite(rows.upper), np.isfinite(rows.lower)
-    ub = disc.z_upper
-    res = linprog(
-        c,
-        A_ub=sp.vstack([rows.matrix[up], -rows.matrix[lo]]).tocsr(),
-        b_ub=np.concatenate([rows.upper[up], -rows.lower[lo]]),
-        bounds=np.column_stack([np.zeros(ub.size), np.where(np.isfinite(ub), ub, np.nan)]),
-        method="highs",
-    )
-    if res.status != 0:
-        raise SolverError(f"HiGHS failed on the stage-1 LP: {res.message}", status=res.status)
-    return np.maximum(res.x, 0.0), float(res.fun)
-
-
 def _relinearise(
     disc: Discretisation,
     solve: Callable[[NDArray[np.float64]], NDArray[np.float64]],
@@ -297,7 +253,10 @@ def _relinearise(
     """Re-solve with the damping linearised at the last answer until it stops moving.
 
     At the fixed point the tangent of √b is taken where it touches, so the constraints hold exactly.
-    Returns the answer and the number of solves, the first (given as ``z``) included.
+    It also stops when the answer already keeps every row with the exact damping torque to 1e-9
+    of its range after a linearised solve: the tangent's error there is second-order in the last
+    change, and :func:`into_limits` removes what is left of it. Returns the answer and the number
+    of solves, the first (given as ``z``) included.
     """
     rounds = 1
     while disc.has_damping and rounds < max_rounds:
@@ -305,18 +264,9 @@ def _relinearise(
         rounds += 1
         change = np.max(np.abs(z_new - z)) / max(z_new.max(), 1e-300)
         z = z_new
-        if change < tolerance:
+        if change < tolerance or disc.relative_excess(z) <= 1e-9:
             break
     return z, rounds
-
-
-def _greatest_profile(disc: Discretisation) -> tuple[NDArray[np.float64], int]:
-    """The greatest feasible b (maximise Σ b), damping linearised to a fixed point."""
-    weights = -np.ones(disc.problem.segments - 1)
-    z, _ = _lp(disc, weights)
-    return _relinearise(
-        disc, lambda z_lin: _lp(disc, weights, z_lin)[0], z, tolerance=1e-10, max_rounds=51
-    )
 
 
 def largest_scale(excess: Callable[[float], float]) -> float:
