@@ -18,7 +18,7 @@ from .errors import (
     URDFError,
 )
 from .path import BSplinePath, Path, SplinePath, StraightPath
-from .planner import Iteration, PlanResult, plan
+from .planning import Iteration, PlanResult, plan
 from .robot import JointLimits, PathCoefficients, Robot
 from .timing import TimingResult, optimal_timing
 from .trajectory import Samples, Trajectory

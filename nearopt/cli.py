@@ -25,7 +25,7 @@ from .catalog import available_robots
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .export import check_writable, csv_text, json_text, write_all
-from .planner import METHODS, plan
+from .planning import METHODS, plan
 from .robot import Robot
 from .verify import VerificationError, verify
 

@@ -21,7 +21,7 @@ import numpy as np
 from .errors import ConfigurationError, SamplingWarning
 
 if TYPE_CHECKING:
-    from .planner import PlanResult
+    from .planning import PlanResult
 
 __all__ = [
     "check_sampling",

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
     from numpy.typing import NDArray
 
-    from .planner import PlanResult
+    from .planning import PlanResult
     from .robot import Robot
     from .trajectory import Trajectory
 

@@ -42,7 +42,7 @@ from .figures import plane_axes, tip_path
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from .planner import PlanResult
+    from .planning import PlanResult
     from .robot import Robot
     from .trajectory import Trajectory
 

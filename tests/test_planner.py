@@ -8,8 +8,7 @@ from checks import assert_independent_checks
 from conftest import load, random_configuration
 
 import nearopt
-from nearopt.gradient import nominal_motion, torque_gradient
-from nearopt.sensitivity import timing_sensitivity
+from nearopt.planning import nominal_motion, timing_sensitivity, torque_gradient
 from nearopt.timing import build_timing_problem, solve_timing
 
 THETA_0 = np.deg2rad([45.0, -90.0])

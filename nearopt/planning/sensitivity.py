@@ -26,13 +26,13 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.optimize import nnls
 
-from .timing import Discretisation, TimingProblem
+from ..timing import Discretisation, TimingProblem
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from .cost import Cost
-    from .robot import Robot
+    from ..cost import Cost
+    from ..robot import Robot
 
 __all__ = ["PathSensitivity", "timing_sensitivity"]
 

@@ -9,11 +9,11 @@ updates:
     are θ0 and θe; the interior ones are moved by SciPy's L-BFGS-B to minimise stage 1's optimal
     cost J*(path), starting from the straight line of eqs. (28)-(29). The gradient is exact for
     the discretised problem: the envelope theorem at stage 1's KKT point
-    (:func:`~nearopt.sensitivity.timing_sensitivity`), one stage-1 solve per evaluation. Joint
+    (:func:`~nearopt.planning.timing_sensitivity`), one stage-1 solve per evaluation. Joint
     position limits are box bounds on the control points, which keep the curve inside them.
 ``method="paper"``
     The update of Section 6: the gradient η(t) of eq. (27) with respect to the torques (adjoint
-    form, :func:`~nearopt.gradient.torque_gradient`), improved torques u* = u − αη clipped to the
+    form, :func:`~nearopt.planning.torque_gradient`), improved torques u* = u − αη clipped to the
     limits (eqs. 22, 30), the next path from the two-point boundary-value problem (eq. 20), for
     +Δt and −Δt, the better kept; α is found by a line search instead of by hand.
 """
@@ -22,116 +22,32 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 from scipy.optimize import Bounds, minimize
 
-from .cost import Cost, TimeCost
-from .errors import ConfigurationError, InfeasiblePathError, SolverError
-from .path import BSplinePath, Path, StraightPath
-from .sensitivity import timing_sensitivity
-from .timing import (
+from ..cost import Cost, TimeCost
+from ..errors import ConfigurationError, InfeasiblePathError, SolverError
+from ..path import BSplinePath, Path, StraightPath
+from ..timing import (
     MAX_GRID,
-    TimingResult,
     build_timing_problem,
     optimal_timing,
     solve_timing,
 )
-from .trajectory import segment_times
+from ..trajectory import segment_times
+from .records import Iteration, PlanResult
+from .sensitivity import timing_sensitivity
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
-    from .robot import Robot
-    from .trajectory import Trajectory
+    from ..robot import Robot
 
-__all__ = ["Iteration", "PlanResult", "plan", "METHODS"]
+__all__ = ["plan", "METHODS"]
 
 METHODS = ("quasi-newton", "paper")
-
-
-@dataclass(frozen=True)
-class Iteration:
-    """One accepted iterate j of the planner (a row of the paper's Table 2).
-
-    Attributes
-    ----------
-    index
-        j; 0 is the straight line.
-    J
-        Stage 1's optimal cost of the iterate's path on the grid (the discretised J^j).
-    alpha
-        The step that produced it: α of eq. (22) for ``"paper"``; for ``"quasi-newton"`` the largest
-        control-point move [rad]. None for j = 0.
-    duration
-        t_e of the iterate's optimal timing [s].
-    wall_time
-        Seconds since the planner started.
-    path
-        The iterate's path θ^j(s) (from θ0 to θe exactly).
-    """
-
-    index: int
-    J: float
-    alpha: float | None
-    duration: float
-    wall_time: float
-    path: Path
-
-
-@dataclass(frozen=True)
-class PlanResult:
-    """A planned motion and how it was found.
-
-    Attributes
-    ----------
-    robot
-        The arm it was planned for (with the limits that were enforced).
-    cost
-        The running cost f0 that was minimised.
-    trajectory
-        The motion: θ(t), θ̇(t), θ̈(t), u(t) on [0, duration], from rest at θ0 to rest at θe.
-    path
-        Its spatial path θ(s).
-    J
-        ∫ f0 dt of the returned motion (Gauss-Legendre over the exact timing).
-    duration
-        t_e [s].
-    history
-        The accepted iterates, the straight line first.
-    status
-        ``"converged"``, ``"iteration_limit"``, ``"time_limit"`` or ``"stalled"`` (the optimiser
-        found no lower J along its direction before its tolerance; the best iterate is returned).
-    method
-        ``"quasi-newton"`` or ``"paper"``.
-    message
-        What stopped the iteration, in words.
-    evaluations
-        Stage-1 solves spent.
-    wall_time
-        Seconds spent in total.
-    initial
-        Stage 1 on the straight line (the paper's J^0).
-    timing
-        Stage 1's report on the returned path.
-    """
-
-    robot: Robot
-    cost: Cost
-    trajectory: Trajectory
-    path: Path
-    J: float
-    duration: float
-    history: tuple[Iteration, ...]
-    status: str
-    method: str
-    message: str
-    evaluations: int
-    wall_time: float
-    initial: TimingResult
-    timing: TimingResult
 
 
 def plan(
@@ -242,7 +158,7 @@ def plan(
             time_limit, tolerance, t_start, accept,
         )
     else:
-        from .gradient import paper_iterations
+        from .paper import paper_iterations
 
         path, status, message, evaluations = paper_iterations(
             robot, initial, cost, options, position_limits, gamma, max_iterations, time_limit,

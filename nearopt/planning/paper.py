@@ -37,17 +37,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 from scipy.integrate import solve_bvp, solve_ivp
 
-from .errors import InfeasiblePathError, SolverError
-from .path import Path, SplinePath
-from .timing import TimingResult, optimal_timing
+from ..errors import InfeasiblePathError, SolverError
+from ..path import Path, SplinePath
+from ..timing import TimingResult, optimal_timing
+from .records import Iteration
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from .cost import Cost
-    from .planner import Iteration
-    from .robot import Robot
-    from .trajectory import Trajectory
+    from ..cost import Cost
+    from ..robot import Robot
+    from ..trajectory import Trajectory
 
 __all__ = ["torque_gradient", "nominal_motion", "boundary_value_path", "paper_iterations"]
 
@@ -198,8 +198,6 @@ def paper_iterations(
     an accepted one lets the next iteration start from 2α and 1.5Δt (Δt ≤ 0.2 t_e). Accepted
     iterates lower J strictly, so the last one is the best.
     """
-    from .planner import Iteration
-
     current: TimingResult = initial
     path: Path = initial.trajectory.path
     q0 = np.asarray(path(0.0, 0)[0])
