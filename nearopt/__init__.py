@@ -18,7 +18,15 @@ from .errors import (
     URDFError,
 )
 from .path import BSplinePath, Path, SplinePath, StraightPath
-from .planning import Iteration, PlanResult, plan
+from .planning import (
+    Iteration,
+    Method,
+    PaperOptions,
+    PlanResult,
+    SCPOptions,
+    StopReason,
+    plan,
+)
 from .robot import JointLimits, PathCoefficients, Robot
 from .timing import TimingResult, optimal_timing
 from .trajectory import Samples, Trajectory
@@ -38,6 +46,10 @@ __all__ = [
     "plan",
     "PlanResult",
     "Iteration",
+    "Method",
+    "StopReason",
+    "SCPOptions",
+    "PaperOptions",
     "TimingResult",
     "Trajectory",
     "Samples",

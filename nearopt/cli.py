@@ -67,7 +67,7 @@ def _parser() -> argparse.ArgumentParser:
     cost.add_argument("--time-optimal", action="store_true", help="f0 = 1 (the default)")
     p.add_argument("--stage1-only", action="store_true",
                    help="only time the straight joint line optimally (stage 1)")
-    p.add_argument("--method", choices=METHODS, default="quasi-newton", help="path update")
+    p.add_argument("--method", choices=METHODS, default="scp", help="path update (scp)")
     p.add_argument("--grid", type=int, default=200, help="stage-1 grid segments (200)")
     p.add_argument("--max-iterations", type=int, default=200, help="iteration budget (200)")
     p.add_argument("--time-limit", type=float, default=300.0, help="wall-time budget [s] (300)")

@@ -154,7 +154,7 @@ class SplinePath:
 
 
 class BSplinePath:
-    """A clamped cubic B-spline θ(s) = Σ_j B_j(s) c_j on s ∈ [0, 1] with uniform interior knots.
+    """A clamped cubic B-spline θ(s) = Σ_j B_j(s) c_j on s ∈ [0, 1].
 
     The path stage 2 optimises: θ(0) = c_0 and θ(1) = c_last exactly, and by the convex-hull
     property θ(s) stays within any box that holds every control point (how joint position limits
@@ -164,11 +164,13 @@ class BSplinePath:
     ----------
     control_points
         c_0 … c_{K+1} [rad or m], shape (K + 2, n), K ≥ 2 interior points.
+    breaks
+        The K − 2 interior knots, strictly increasing in (0, 1); default: uniform.
     """
 
     degree = 3
 
-    def __init__(self, control_points: ArrayLike) -> None:
+    def __init__(self, control_points: ArrayLike, breaks: ArrayLike | None = None) -> None:
         c = np.array(control_points, dtype=float)
         if c.ndim != 2 or c.shape[0] < 4 or not np.all(np.isfinite(c)):
             raise ConfigurationError(
@@ -176,26 +178,40 @@ class BSplinePath:
             )
         c.flags.writeable = False
         self.control_points = c
-        self.knots = self.knot_vector(c.shape[0])
+        self.knots = self.knot_vector(c.shape[0], breaks)
+        self.knots.setflags(write=False)
         self._spline = BSpline(self.knots, c, self.degree)
 
     @classmethod
-    def knot_vector(cls, count: int) -> NDArray[np.float64]:
-        """The clamped uniform knot vector for ``count`` control points."""
+    def knot_vector(cls, count: int, breaks: ArrayLike | None = None) -> NDArray[np.float64]:
+        """The clamped knot vector for ``count`` control points and the given interior knots
+        (default: uniform), shape (count + 4,)."""
         k = cls.degree
-        return np.concatenate([np.zeros(k), np.linspace(0.0, 1.0, count - k + 1), np.ones(k)])
+        if breaks is None:
+            inner = np.linspace(0.0, 1.0, count - k + 1)[1:-1]
+        else:
+            inner = np.asarray(breaks, dtype=float).ravel()
+            if (inner.size != count - k - 1 or np.any(np.diff(inner) <= 0)
+                    or np.any(inner <= 0.0) or np.any(inner >= 1.0)):
+                raise ConfigurationError(
+                    f"breaks must be {count - k - 1} increasing values in (0, 1) for {count} "
+                    f"control points, got {inner.tolist()}"
+                )
+        return np.concatenate([np.zeros(k + 1), inner, np.ones(k + 1)])
 
     @classmethod
-    def line(cls, theta0: ArrayLike, thetae: ArrayLike, interior: int) -> BSplinePath:
+    def line(
+        cls, theta0: ArrayLike, thetae: ArrayLike, interior: int, breaks: ArrayLike | None = None
+    ) -> BSplinePath:
         """The straight line of eqs. (28)-(29) with ``interior`` free control points."""
         a = _as_joint_vector(theta0, "theta0")
         e = _as_joint_vector(thetae, "thetae")
-        return cls(a + np.outer(cls.greville(interior + 2), e - a))
+        return cls(a + np.outer(cls.greville(interior + 2, breaks), e - a), breaks)
 
     @classmethod
-    def greville(cls, count: int) -> NDArray[np.float64]:
+    def greville(cls, count: int, breaks: ArrayLike | None = None) -> NDArray[np.float64]:
         """Greville abscissae (knot averages) of the ``count`` basis functions."""
-        t = cls.knot_vector(count)
+        t = cls.knot_vector(count, breaks)
         return np.array([t[j + 1 : j + cls.degree + 1].mean() for j in range(count)])
 
     def basis(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:

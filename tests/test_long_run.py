@@ -31,7 +31,8 @@ def test_two_hundred_plans_neither_leak_nor_hang() -> None:
         cost = nearopt.TorqueCost(0.03) if k % 3 else nearopt.TimeCost()
         start = time.perf_counter()
         try:
-            result = nearopt.plan(robot, q0, qe, cost, grid=30, control_points=4,
+            result = nearopt.plan(robot, q0, qe, cost, grid=30,
+                                  options=nearopt.SCPOptions(control_points=4, grid=30),
                                   max_iterations=4, time_limit=TIME_LIMIT)
             assert result.J <= result.initial.J
             outcomes["planned"] += 1

@@ -11,7 +11,7 @@ import nearopt
 
 SEEDS = range(5)
 COSTS = [nearopt.TimeCost(), nearopt.TorqueCost(0.03)]
-BUDGET = {"grid": 40, "control_points": 6, "max_iterations": 5}
+BUDGET = {"grid": 40, "options": nearopt.SCPOptions(control_points=6, grid=40), "max_iterations": 5}
 
 
 @pytest.mark.parametrize("seed", SEEDS)

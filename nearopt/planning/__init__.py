@@ -1,22 +1,40 @@
 """Stage 2 and the planner (Sections 5-6): improve the path itself, re-timing it by stage 1.
 
-``records`` holds what a plan returns, ``sensitivity`` the gradient of stage 1's optimum with
-respect to the path, ``paper`` the paper's own update (torque gradient, improved torques,
-boundary-value problem) and ``planner`` the loop of Section 6, :func:`plan`.
+``records`` holds the methods, their options and what a plan returns; ``linearisation`` stage 1's
+rows as functions of the path; ``scp`` the default path update (sequential convex programming);
+``paper`` the paper's own update (torque gradient, improved torques, boundary-value problem);
+``planner`` the loop of Section 6, :func:`plan`.
 """
 
+from .linearisation import PathBasis, path_basis, row_path_jacobian
 from .paper import boundary_value_path, nominal_motion, paper_iterations, torque_gradient
-from .planner import METHODS, plan
-from .records import Iteration, PlanResult
-from .sensitivity import PathSensitivity, timing_sensitivity
+from .planner import MAX_CONTROL_POINTS, METHODS, plan
+from .records import (
+    Iteration,
+    Method,
+    MethodOutcome,
+    PaperOptions,
+    PlanResult,
+    SCPOptions,
+    StopReason,
+)
+from .scp import sequential_convex
 
 __all__ = [
     "plan",
     "METHODS",
+    "MAX_CONTROL_POINTS",
+    "Method",
+    "StopReason",
+    "SCPOptions",
+    "PaperOptions",
     "Iteration",
+    "MethodOutcome",
     "PlanResult",
-    "PathSensitivity",
-    "timing_sensitivity",
+    "PathBasis",
+    "path_basis",
+    "row_path_jacobian",
+    "sequential_convex",
     "torque_gradient",
     "nominal_motion",
     "boundary_value_path",

@@ -40,7 +40,7 @@ from scipy.integrate import solve_bvp, solve_ivp
 from ..errors import InfeasiblePathError, SolverError
 from ..path import Path, SplinePath
 from ..timing import TimingResult, optimal_timing
-from .records import Iteration
+from .records import Iteration, MethodOutcome, PaperOptions, StopReason
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -177,26 +177,24 @@ def paper_iterations(
     robot: Robot,
     initial: TimingResult,
     cost: Cost,
-    options: dict,
+    *,
+    grid: int,
+    velocity_limits: bool,
     position_limits: bool,
-    gamma: float,
+    options: PaperOptions,
     max_iterations: int,
-    time_limit: float,
-    tolerance: float,
+    deadline: float,
     t_start: float,
     accept: Callable[[Iteration], None],
-    *,
-    alpha: float = 0.3,
-    delta_t: float = 0.1,
-    trials: int = 8,
-) -> tuple[Path, str, str, int]:
+) -> MethodOutcome:
     """Section 6's loop from the straight line, with α and Δt found by a search.
 
     Each trial computes η for T = t_e ± Δt (Δt = ``delta_t`` · t_e), the improved torques and the
     two next paths, times both by stage 1 and keeps the better (step 3 of Section 6). A trial that
     does not lower J is followed by one with α / 4 or Δt / 2 (alternately), up to ``trials`` times;
     an accepted one lets the next iteration start from 2α and 1.5Δt (Δt ≤ 0.2 t_e). Accepted
-    iterates lower J strictly, so the last one is the best.
+    iterates lower J strictly, so the last one is the best. ``initial`` (the straight line, timed)
+    has been accepted as iterate 0 by the caller.
     """
     current: TimingResult = initial
     path: Path = initial.trajectory.path
@@ -204,15 +202,19 @@ def paper_iterations(
     qe = np.asarray(path(path.s_end, 0)[0])
     target = np.concatenate([qe, np.zeros(robot.n)])
     lim = robot.limits
-    evaluations = 1
-    status, message = "iteration_limit", f"{max_iterations} iterations"
+    alpha, delta_t, trials = options.alpha, options.delta_t, options.trials
+    evaluations = 0
+    reason, message = StopReason.ITERATION_LIMIT, f"{max_iterations} iterations"
     for index in range(1, max_iterations + 1):
+        if time.perf_counter() > deadline:
+            reason, message = StopReason.TIME_LIMIT, "the time limit was reached"
+            break
         best: tuple[TimingResult, Path] | None = None
         for trial in range(trials):
             for sign in (1.0, -1.0):
                 horizon = current.duration * (1.0 + sign * delta_t)
                 t, x, u = nominal_motion(robot, current.trajectory, horizon)
-                eta = torque_gradient(robot, t, x, u, cost, target, gamma)
+                eta = torque_gradient(robot, t, x, u, cost, target, options.gamma)
                 u_star = np.clip(u - alpha * eta, lim.effort_lower, lim.effort_upper)
                 candidate = boundary_value_path(robot, t, x, u_star, q0, qe)
                 if candidate is None:
@@ -222,7 +224,8 @@ def paper_iterations(
                     if np.any(theta < lim.position_lower) or np.any(theta > lim.position_upper):
                         continue
                 try:
-                    timing = optimal_timing(robot, candidate, cost, **options)
+                    timing = optimal_timing(robot, candidate, cost, grid=grid,
+                                            velocity_limits=velocity_limits)
                 except (InfeasiblePathError, SolverError):
                     continue
                 evaluations += 1
@@ -235,17 +238,17 @@ def paper_iterations(
             else:
                 delta_t /= 2.0
         if best is None or best[0].objective >= current.objective:
-            status, message = "converged", f"no step lowers J in {trials} trials of α and Δt"
+            reason = StopReason.NO_PROGRESS
+            message = (f"could not improve: no step of the paper's update lowers J in {trials} "
+                       f"trials of α (down to {alpha:.2g}) and Δt (down to {delta_t:.2g} t_e)")
             break
         gain = current.objective - best[0].objective
         current, path = best
         wall = time.perf_counter() - t_start
         accept(Iteration(index, current.objective, alpha, current.duration, wall, path))
-        if gain < tolerance * current.objective:
-            status, message = "converged", f"J changed by less than {tolerance:g} relative"
-            break
-        if time.perf_counter() - t_start > time_limit:
-            status, message = "time_limit", f"time limit of {time_limit} s reached"
+        if gain < options.tolerance * current.objective:
+            reason = StopReason.CONVERGED
+            message = f"converged: J changed by less than {options.tolerance:g} relative"
             break
         alpha, delta_t = 2.0 * alpha, min(1.5 * delta_t, 0.2)
-    return path, status, message, evaluations
+    return MethodOutcome(current, reason, message, evaluations)

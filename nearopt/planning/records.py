@@ -1,9 +1,14 @@
-"""The records of a plan: its iterates and its result (the bottom of the planning package)."""
+"""The records of a plan: methods and their options, its iterates and its result.
+
+The bottom of the planning package: every other module of it imports from here, nothing here
+imports from them.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from enum import StrEnum
+from typing import TYPE_CHECKING, Literal
 
 if TYPE_CHECKING:
     from ..cost import Cost
@@ -12,7 +17,101 @@ if TYPE_CHECKING:
     from ..timing import TimingResult
     from ..trajectory import Trajectory
 
-__all__ = ["Iteration", "PlanResult"]
+__all__ = [
+    "Method",
+    "StopReason",
+    "SCPOptions",
+    "PaperOptions",
+    "Iteration",
+    "MethodOutcome",
+    "PlanResult",
+]
+
+
+class Method(StrEnum):
+    """How stage 2 improves the path."""
+
+    SCP = "scp"
+    """Sequential convex programming on a B-spline path (the default; see
+    :mod:`nearopt.planning.scp`)."""
+    PAPER = "paper"
+    """The paper's update of Section 6: torque gradient, improved torques, boundary-value problem
+    (see :mod:`nearopt.planning.paper`)."""
+
+
+class StopReason(StrEnum):
+    """Why the planner stopped; :attr:`PlanResult.message` says it in words, with figures."""
+
+    CONVERGED = "converged"
+    """No better path within the method's tolerance (a stationary point, to first order)."""
+    ITERATION_LIMIT = "iteration limit"
+    """``max_iterations`` accepted iterates (0: the straight line only)."""
+    TIME_LIMIT = "time limit"
+    """``time_limit`` seconds spent; the best path so far is returned."""
+    NO_PROGRESS = "no progress"
+    """The method found no step that lowers J although it is not converged (the paper's update
+    at its α and Δt search limits)."""
+    SOLVER = "solver failure"
+    """A convex subproblem could not be solved; the best path so far is returned."""
+
+
+@dataclass(frozen=True)
+class SCPOptions:
+    """Options of ``method="scp"``.
+
+    Attributes
+    ----------
+    control_points
+        K, the interior control points of the B-spline path (2 ≤ K ≤ 200).
+    knots
+        Where the B-spline's interior knots lie: ``"clustered"`` at the rest ends like stage 1's
+        grid (σ = ½(1 − cos πx), x uniform: where a motion starts and stops, its path bends most)
+        or ``"uniform"``.
+    grid
+        Stage 1's grid while the path is optimised (≥ 2); the plan's own grid (``plan(grid=)``)
+        times the returned path. Optimising on a coarser grid is several times faster and moves
+        the optimum little (J on the two grids differs by O(1/N²)).
+    trust_radius
+        The first trust radius ρ: how far θ' may move in one step, a fraction of each joint's
+        scale (its motion |θe_i − θ0_i|, at least 10 % of its range and 0.1 rad).
+    min_trust_radius
+        Stop when ρ falls below this fraction.
+    tolerance
+        Stop when the convex model predicts a relative decrease of J below this, or J changed by
+        less than this in each of the last 3 iterations.
+    """
+
+    control_points: int = 16
+    knots: Literal["clustered", "uniform"] = "clustered"
+    grid: int = 64
+    trust_radius: float = 0.5
+    min_trust_radius: float = 1e-6
+    tolerance: float = 1e-4
+
+
+@dataclass(frozen=True)
+class PaperOptions:
+    """Options of ``method="paper"`` (Section 6's update).
+
+    Attributes
+    ----------
+    gamma
+        γ of eq. (33), the weight of the terminal penalty F in the gradient.
+    alpha
+        The first α of eq. (22); it is searched from there.
+    delta_t
+        The first Δt of eq. (27), a fraction of t_e.
+    trials
+        Trials of α and Δt per iteration before it stops.
+    tolerance
+        Stop when an iteration lowers J by less than this fraction.
+    """
+
+    gamma: float = 0.1
+    alpha: float = 0.3
+    delta_t: float = 0.1
+    trials: int = 8
+    tolerance: float = 1e-7
 
 
 @dataclass(frozen=True)
@@ -26,7 +125,7 @@ class Iteration:
     J
         Stage 1's optimal cost of the iterate's path on the grid (the discretised J^j).
     alpha
-        The step that produced it: α of eq. (22) for ``"paper"``; for ``"quasi-newton"`` the largest
+        The step that produced it: α of eq. (22) for ``"paper"``; for ``"scp"`` the largest
         control-point move [rad]. None for j = 0.
     duration
         t_e of the iterate's optimal timing [s].
@@ -45,6 +144,28 @@ class Iteration:
 
 
 @dataclass(frozen=True)
+class MethodOutcome:
+    """Where a path update stopped.
+
+    Attributes
+    ----------
+    timing
+        Stage 1 on the best path (the last accepted iterate).
+    reason
+        Why it stopped.
+    message
+        The same in words, with the figures.
+    evaluations
+        Stage-1 solves spent (the straight line's included).
+    """
+
+    timing: TimingResult
+    reason: StopReason
+    message: str
+    evaluations: int
+
+
+@dataclass(frozen=True)
 class PlanResult:
     """A planned motion and how it was found.
 
@@ -52,46 +173,55 @@ class PlanResult:
     ----------
     robot
         The arm it was planned for (with the limits that were enforced).
-    cost
-        The running cost f0 that was minimised.
-    trajectory
-        The motion: θ(t), θ̇(t), θ̈(t), u(t) on [0, duration], from rest at θ0 to rest at θe.
-    path
-        Its spatial path θ(s).
-    J
-        ∫ f0 dt of the returned motion (Gauss-Legendre over the exact timing).
-    duration
-        t_e [s].
+    timing
+        Stage 1 on the returned path: the motion, its J and t_e.
+    initial
+        Stage 1 on the straight line (the paper's J^0).
     history
         The accepted iterates, the straight line first.
-    status
-        ``"converged"``, ``"iteration_limit"``, ``"time_limit"`` or ``"stalled"`` (the optimiser
-        found no lower J along its direction before its tolerance; the best iterate is returned).
     method
-        ``"quasi-newton"`` or ``"paper"``.
+        The path update used.
+    status
+        Why it stopped.
     message
-        What stopped the iteration, in words.
+        The same in words, with the figures.
     evaluations
         Stage-1 solves spent.
     wall_time
         Seconds spent in total.
-    initial
-        Stage 1 on the straight line (the paper's J^0).
-    timing
-        Stage 1's report on the returned path.
     """
 
     robot: Robot
-    cost: Cost
-    trajectory: Trajectory
-    path: Path
-    J: float
-    duration: float
+    timing: TimingResult
+    initial: TimingResult
     history: tuple[Iteration, ...]
-    status: str
-    method: str
+    method: Method
+    status: StopReason
     message: str
     evaluations: int
     wall_time: float
-    initial: TimingResult
-    timing: TimingResult
+
+    @property
+    def trajectory(self) -> Trajectory:
+        """The motion: θ(t), θ̇(t), θ̈(t), u(t) on [0, t_e], from rest at θ0 to rest at θe."""
+        return self.timing.trajectory
+
+    @property
+    def path(self) -> Path:
+        """Its spatial path θ(s)."""
+        return self.timing.trajectory.path
+
+    @property
+    def cost(self) -> Cost:
+        """The running cost f0 that was minimised."""
+        return self.timing.cost
+
+    @property
+    def J(self) -> float:  # noqa: N802 - the paper's name
+        """∫ f0 dt of the returned motion (adaptive Gauss-Kronrod over the exact timing)."""
+        return self.timing.J
+
+    @property
+    def duration(self) -> float:
+        """t_e [s]."""
+        return self.timing.duration

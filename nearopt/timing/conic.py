@@ -67,7 +67,7 @@ def solve_conic(
     z_upper: NDArray[np.float64],
     *,
     p_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
-    p_quadratic: sp.spmatrix | None = None,
+    torque_limits: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
     tolerance: float = 1e-9,
     time_limit: float = np.inf,
 ) -> ConicSolution:
@@ -88,8 +88,11 @@ def solve_conic(
         Upper bounds on z (inf where none), shape (N − 1,); z ≥ 0 always.
     p_bounds
         Lower and upper bounds on p, each (P,), or None when there is no p.
-    p_quadratic
-        Optional ½ pᵀ Q p added to the objective, Q (P, P) symmetric positive semi-definite.
+    torque_limits
+        Lower and upper limits of the torque samples, each (n·2N,) (±inf where none), when they
+        are not among ``rows``. The torques are then variables v = T (z, p) + u0 of their own,
+        bounded directly: with p, T's rows are dense in p, and each is then held once instead of
+        in the cost's cone and both sides of a limit (a much sparser problem).
     tolerance
         Clarabel's gap and feasibility tolerances.
     time_limit
@@ -103,7 +106,10 @@ def solve_conic(
     iz, ip = 0, nz
     ic = nz + n_p
     it, ie = ic + nz, ic + nz + big_n
-    nx = ie + big_n
+    energy = bool(np.any(weights > 0))
+    iv = ie + big_n
+    nv = 0 if torque_limits is None else n * 2 * big_n
+    nx = iv + nv
     seg = np.arange(big_n)
     trip_r: list[NDArray[np.int64]] = []
     trip_c: list[NDArray[np.int64]] = []
@@ -133,10 +139,12 @@ def solve_conic(
     put(count + np.arange(finite.size), iz + finite, np.ones(finite.size))
     rhs.append(z_upper[finite])
     count += finite.size
-    if n_p:
-        for sign, side in ((1.0, p_bounds[1]), (-1.0, -p_bounds[0])):
+    bounded = [(ip, p_bounds)] if n_p else []
+    bounded += [(iv, torque_limits)] if nv else []
+    for first, (low, high) in bounded:
+        for sign, side in ((1.0, high), (-1.0, -low)):
             finite = np.flatnonzero(np.isfinite(side))
-            put(count + np.arange(finite.size), ip + finite, sign * np.ones(finite.size))
+            put(count + np.arange(finite.size), first + finite, sign * np.ones(finite.size))
             rhs.append(side[finite])
             count += finite.size
     cones: list[object] = [clarabel.NonnegativeConeT(count)]
@@ -171,19 +179,24 @@ def solve_conic(
     # 4. e_k y_k ≥ Δσ_k Σ w (u_{k+}² + u_{(k+1)-}²) ⇔ ‖(2v, e_k − y_k)‖ ≤ e_k + y_k, v = √(Δσ w) u
     q_vec = np.zeros(nx)
     q_vec[it : it + big_n] = 1.0
-    if np.any(weights > 0):
+    if energy:
         width = 2 + 2 * n
         cone_xy(width, ie)
-        tt = sp.coo_matrix(torque[0])
-        joint, r = np.divmod(tt.row, 2 * big_n)
-        k_of = np.where(r < big_n, r, r - big_n)
-        slot = np.where(r < big_n, joint, n + joint)
-        put(width * k_of + 1 + slot, tt.col, -2.0 * np.sqrt(ds[k_of] * weights[joint]) * tt.data)
         joint_all, r_all = np.divmod(np.arange(n * 2 * big_n), 2 * big_n)
         k_all = np.where(r_all < big_n, r_all, r_all - big_n)
         slot_all = np.where(r_all < big_n, joint_all, n + joint_all)
+        scale_all = 2.0 * np.sqrt(ds[k_all] * weights[joint_all])
         e_rhs = np.zeros((big_n, width))
-        e_rhs[k_all, 1 + slot_all] = 2.0 * np.sqrt(ds[k_all] * weights[joint_all]) * torque[1]
+        if nv:
+            put(width * k_all + 1 + slot_all, iv + np.arange(nv), -scale_all)
+        else:
+            tt = sp.coo_matrix(torque[0])
+            joint, r = np.divmod(tt.row, 2 * big_n)
+            k_of = np.where(r < big_n, r, r - big_n)
+            slot = np.where(r < big_n, joint, n + joint)
+            put(width * k_of + 1 + slot, tt.col,
+                -2.0 * np.sqrt(ds[k_of] * weights[joint]) * tt.data)
+            e_rhs[k_all, 1 + slot_all] = scale_all * torque[1]
         rhs.append(e_rhs.ravel())
         cones += [clarabel.SecondOrderConeT(width)] * big_n
         row0 += width * big_n
@@ -193,13 +206,17 @@ def solve_conic(
         rhs.append(np.zeros(big_n))
         cones.append(clarabel.ZeroConeT(big_n))
         row0 += big_n
+    if nv:  # v = T (z, p) + u0 ⇔ T (z, p) − v = −u0
+        tt = sp.coo_matrix(torque[0])
+        put(tt.row, tt.col, tt.data)
+        put(np.arange(nv), iv + np.arange(nv), -np.ones(nv))
+        rhs.append(-np.asarray(torque[1], dtype=float))
+        cones.append(clarabel.ZeroConeT(nv))
+        row0 += nv
     a_all = sp.csc_matrix(
         (np.concatenate(trip_v), (np.concatenate(trip_r), np.concatenate(trip_c))), shape=(row0, nx)
     )
     p_mat = sp.csc_matrix((nx, nx))
-    if p_quadratic is not None and n_p:
-        quad = sp.triu(sp.coo_matrix(p_quadratic)).tocoo()
-        p_mat = sp.csc_matrix((quad.data, (quad.row + ip, quad.col + ip)), shape=(nx, nx))
     settings = clarabel.DefaultSettings()
     settings.verbose = False
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = tolerance

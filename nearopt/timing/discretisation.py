@@ -125,23 +125,28 @@ class Discretisation:
 
     def _reduce(self) -> None:
         """For a fixed path the speed rows of different joints at one place are proportional:
-        keep the tightest inside segments, and turn those at the knots into bounds on z."""
+        turn those at the knots into bounds on z, and inside segments keep the tightest row of
+        each point unless the knots' bounds imply it (b inside is a convex combination)."""
         knots = self.blocks.speed
         cap = self.z_upper.copy()
-        if knots.stop > knots.start:
-            coef = self.matrix[knots].tocsr()
-            col = coef.indices - 1  # one entry per row: the knot's b
-            np.minimum.at(cap, col, self.upper[knots] / coef.data)
-        self.z_cap = cap
-        inside = np.arange(self.blocks.interior_speed.start, self.blocks.interior_speed.stop)
-        keep = np.ones(inside.size, dtype=bool)
-        if inside.size:
-            scale = np.asarray(abs(self.matrix[inside]).sum(axis=1)).ravel()  # θ'_i² here
-            bound = self.upper[inside] / scale
-            order = np.lexsort((bound, self.location[inside]))
-            first = np.r_[True, np.diff(self.location[inside][order]) != 0]
-            keep = np.zeros(inside.size, dtype=bool)
-            keep[order[first]] = True
+        with np.errstate(divide="ignore"):
+            if knots.stop > knots.start:
+                coef = self.matrix[knots].tocsr()
+                col = coef.indices - 1  # one entry per row: the knot's b
+                np.minimum.at(cap, col, self.upper[knots] / coef.data)
+            self.z_cap = cap
+            inside = np.arange(self.blocks.interior_speed.start, self.blocks.interior_speed.stop)
+            keep = np.ones(inside.size, dtype=bool)
+            if inside.size:
+                scale = np.asarray(abs(self.matrix[inside]).sum(axis=1)).ravel()  # θ'_i² here
+                bound = self.upper[inside] / scale
+                order = np.lexsort((bound, self.location[inside]))
+                first = np.r_[True, np.diff(self.location[inside][order]) != 0]
+                keep = np.zeros(inside.size, dtype=bool)
+                keep[order[first]] = True
+                k = self.problem.interior_speed.segment[self.location[inside]]
+                ends = np.concatenate([[0.0], cap, [0.0]])  # b_0 = b_N = 0
+                keep &= bound < np.maximum(ends[k], ends[k + 1])
         self._solver_rows = np.concatenate(
             [np.arange(self.blocks.speed.start), inside[keep]]
         )
@@ -186,10 +191,11 @@ class Discretisation:
         self, cols: list[NDArray[np.int64]], weights: list[NDArray[np.float64]],
         dtheta: NDArray[np.float64], keep: NDArray[np.bool_],
     ) -> tuple | None:
-        """Rows Σ_j w_j b_{col_j} θ'_i² ≤ v_i² at points with slopes ``dtheta`` (P, n)."""
+        """Rows Σ_j w_j b_{col_j} θ'_i² ≤ v_i² at points with slopes ``dtheta`` (P, n), for every
+        joint with a limit (also where θ'_i = 0: the rows are the same for every path)."""
         p = self.problem
         v = p.velocity
-        point, joint = np.nonzero(keep & np.isfinite(v)[None, :] & (dtheta != 0.0))
+        point, joint = np.nonzero(keep & np.isfinite(v)[None, :])
         if point.size == 0:
             return None
         count = point.size
@@ -215,9 +221,7 @@ class Discretisation:
         if inside is None:
             return None
         k = inside.segment
-        # implied by the knots' rows where θ'_i² there is at least as large as inside
-        bound = np.minimum(p.dtheta[k] ** 2, p.dtheta[k + 1] ** 2)
-        keep = inside.dtheta**2 > bound
+        keep = np.ones(inside.dtheta.shape, dtype=bool)
         return self._speed_rows([k, k + 1], [1.0 - inside.weight, inside.weight], inside.dtheta,
                                 keep)
 

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -15,8 +16,11 @@ from .problem import build_timing_problem
 from .solvers import TimingMethod, TimingStatus, solve_timing
 
 if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
     from ..path import Path
     from ..robot import Robot
+    from .problem import TimingProblem
 
 __all__ = ["TimingResult", "optimal_timing"]
 
@@ -29,12 +33,14 @@ class TimingResult:
     ----------
     trajectory
         θ(t), θ̇(t), θ̈(t), u(t) for t ∈ [0, duration].
-    J
-        ∫ f0 dt of the returned motion [s·(unit of f0)], by Gauss-Legendre quadrature per segment.
-    duration
-        t_e [s].
+    cost
+        The running cost f0 that was minimised.
     objective
-        The discretised cost the solver minimised (differs from J by the discretisation, O(Δs²)).
+        The discretised cost the solver minimised (differs from J by the discretisation, O(Δσ²)).
+    problem
+        The problem as finally solved (tightened where the motion left a limit between samples).
+    b
+        b = (dσ/dt)² at its knots σ (``problem.sigma``), shape (N+1,).
     status, solver, iterations, message
         As in :class:`~nearopt.timing.TimingSolution`.
     wall_time
@@ -42,14 +48,25 @@ class TimingResult:
     """
 
     trajectory: Trajectory
-    J: float
-    duration: float
+    cost: Cost
     objective: float
+    problem: TimingProblem
+    b: NDArray[np.float64]
     status: TimingStatus
     solver: TimingMethod
     iterations: int
     message: str
     wall_time: float
+
+    @cached_property
+    def J(self) -> float:  # noqa: N802 - the paper's name
+        """∫ f0 dt of the returned motion [s·(unit of f0)], by adaptive Gauss-Kronrod quadrature."""
+        return self.trajectory.integrate(self.cost)
+
+    @property
+    def duration(self) -> float:
+        """t_e [s]."""
+        return self.trajectory.duration
 
 
 def optimal_timing(
@@ -60,6 +77,7 @@ def optimal_timing(
     grid: int = 200,
     velocity_limits: bool = True,
     tolerance: float = 1e-9,
+    guess: NDArray[np.float64] | None = None,
 ) -> TimingResult:
     """Stage 1: the timing λ(s) of a path that minimises J = ∫ f0 dt under the robot's limits.
 
@@ -79,6 +97,9 @@ def optimal_timing(
         Enforce |θ̇_i| ≤ v_i (the URDF's velocity limits unless overridden).
     tolerance
         Optimality tolerance of the NLP.
+    guess
+        b = (dσ/dt)² at the grid's knots of a path close to this one (e.g. the last iterate of
+        stage 2), shape (N+1,): where a damping torque is first linearised.
 
     Returns
     -------
@@ -93,7 +114,7 @@ def optimal_timing(
     t0 = time.perf_counter()
     cost = TimeCost() if cost is None else cost
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
-    sol = solve_timing(problem, cost, tolerance=tolerance)  # gravity checked at the knots
+    sol = solve_timing(problem, cost, tolerance=tolerance, guess=guess)  # gravity at the knots
     between = BetweenSamples(robot, path, problem)  # and between them
     for _ in range(4):
         # where the motion leaves a limit between samples: a uniform slow-down by α if that
@@ -105,7 +126,7 @@ def optimal_timing(
         if tighter is None:
             break
         problem = tighter
-        sol = solve_timing(problem, cost, tolerance=tolerance)
+        sol = solve_timing(problem, cost, tolerance=tolerance, guess=sol.b)
     else:
         b = uniform_slow_down(between, sol.b)
     # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
@@ -113,9 +134,10 @@ def optimal_timing(
                       robot.inverse_dynamics_batch)
     return TimingResult(
         trajectory=traj,
-        J=traj.integrate(cost),
-        duration=traj.duration,
+        cost=cost,
         objective=sol.objective,
+        problem=problem,
+        b=b,
         status=sol.status,
         solver=sol.solver,
         iterations=sol.iterations,

@@ -89,6 +89,7 @@ def solve_timing(
     tolerance: float = 1e-9,
     max_iterations: int = 1000,
     time_limit: float = np.inf,
+    guess: NDArray[np.float64] | None = None,
 ) -> TimingSolution:
     """Solve stage 1 on a grid (the kernel: arrays in, b out).
 
@@ -104,6 +105,10 @@ def solve_timing(
         Iteration limit of the NLP.
     time_limit
         Wall-time limit of each conic solve [s].
+    guess
+        A timing b near the answer, shape (N+1,), where the damping torque is first linearised
+        (e.g. the last one of a path close to this one); without it, the first solve leaves
+        the damping out.
 
     Raises
     ------
@@ -114,10 +119,13 @@ def solve_timing(
     """
     check_gravity(problem)
     disc = Discretisation(problem)
+    z_guess = None if guess is None or not disc.has_damping else np.asarray(guess)[1:-1]
     if isinstance(cost, TorqueCost):
-        return _solve_convex(disc, cost, cost.torque_weights(problem.dof), tolerance, time_limit)
+        weights = cost.torque_weights(problem.dof)
+        return _solve_convex(disc, cost, weights, tolerance, time_limit, z_guess)
     # any other f0: a local NLP from inside the time-optimal profile
-    fastest = _solve_convex(disc, TimeCost(), np.zeros(problem.dof), tolerance, time_limit)
+    fastest = _solve_convex(disc, TimeCost(), np.zeros(problem.dof), tolerance, time_limit,
+                            z_guess)
     return _solve_nlp(disc, cost, fastest.b[1:-1], tolerance, max_iterations)
 
 
@@ -127,11 +135,12 @@ def _solve_convex(
     weights: NDArray[np.float64],
     tolerance: float,
     time_limit: float = np.inf,
+    z_guess: NDArray[np.float64] | None = None,
 ) -> TimingSolution:
     """f0 = 1 + Σ w u²: the SOCP, repeated with the damping re-linearised until a fixed point.
 
-    The first solve leaves the damping torque out; every further one takes its tangent at the
-    previous answer, exact at the fixed point.
+    The first solve takes the damping torque's tangent at ``z_guess`` or, without one, leaves it
+    out; every further one takes its tangent at the previous answer, exact at the fixed point.
     """
     solutions = []
     torque_rows = disc.blocks.torque
@@ -150,7 +159,7 @@ def _solve_convex(
         solutions.append(sol)
         return sol.z
 
-    z, rounds = _relinearise(disc, socp, socp(None), tolerance=1e-7, max_rounds=30)
+    z, rounds = _relinearise(disc, socp, z_guess, tolerance=1e-7, max_rounds=30)
     iterations = sum(sol.iterations for sol in solutions)
     status = solutions[-1].status
     if not is_solved(status):
@@ -244,8 +253,8 @@ def _solve_nlp(
 
 def _relinearise(
     disc: Discretisation,
-    solve: Callable[[NDArray[np.float64]], NDArray[np.float64]],
-    z: NDArray[np.float64],
+    solve: Callable[[NDArray[np.float64] | None], NDArray[np.float64]],
+    z_lin: NDArray[np.float64] | None,
     *,
     tolerance: float,
     max_rounds: int,
@@ -255,17 +264,17 @@ def _relinearise(
     At the fixed point the tangent of √b is taken where it touches, so the constraints hold exactly.
     It also stops when the answer already keeps every row with the exact damping torque to 1e-9
     of its range after a linearised solve: the tangent's error there is second-order in the last
-    change, and :func:`into_limits` removes what is left of it. Returns the answer and the number
-    of solves, the first (given as ``z``) included.
+    change, and :func:`into_limits` removes what is left of it. The first solve linearises at
+    ``z_lin`` (None: without the damping torque). Returns the answer and the number of solves.
     """
-    rounds = 1
+    z, rounds = solve(z_lin), 1
     while disc.has_damping and rounds < max_rounds:
-        z_new = solve(np.maximum(z, 1e-12 * max(z.max(), 1e-12)))
-        rounds += 1
-        change = np.max(np.abs(z_new - z)) / max(z_new.max(), 1e-300)
-        z = z_new
-        if change < tolerance or disc.relative_excess(z) <= 1e-9:
-            break
+        if z_lin is not None:
+            change = np.max(np.abs(z - z_lin)) / max(z.max(), 1e-300)
+            if change < tolerance or disc.relative_excess(z) <= 1e-9:
+                break
+        z_lin = np.maximum(z, 1e-12 * max(z.max(), 1e-12))
+        z, rounds = solve(z_lin), rounds + 1
     return z, rounds
 
 

@@ -1,0 +1,122 @@
+"""Stage 1's rows as functions of the path: what stage 2 differentiates.
+
+For a path θ(σ) = Σ_j B_j(σ) c_j whose control points c_j are moved by stage 2 (the interior ones,
+flattened into p with index j·n + i for joint i of interior point j), every row of
+:class:`~nearopt.timing.Discretisation` depends on the path through θ, θ', θ'' where it lies:
+
+* torque u_i = ID_i(θ, λθ', bθ'' + aθ') + D_i λ θ'_i at sample r (knot k, segment s):
+  ∂u/∂θ = ∂ID/∂θ, ∂u/∂θ' = λ ∂ID/∂θ̇ + a H, ∂u/∂θ'' = b H (Pinocchio's RNEA derivatives, the
+  damping D included in ∂ID/∂θ̇);
+* joint acceleration θ̈_i = θ'_i a + θ''_i b: ∂/∂θ'_i = a, ∂/∂θ''_i = b;
+* joint speed b θ'_i² (at knots and inside segments): ∂/∂θ'_i = 2 b θ'_i.
+
+With ∂θ^(o)(σ)/∂c_j = B_j^(o)(σ), :func:`row_path_jacobian` gives ∂(rows)/∂p at a timing b; the
+rows are then linear in b (for a fixed path) and, to first order, in p: the convex model of
+stage 2's sequential convex programming.
+"""
+
+from __future__ import annotations
+
+from typing import TYPE_CHECKING, NamedTuple
+
+import numpy as np
+import scipy.sparse as sp
+
+if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
+    from ..path import BSplinePath
+    from ..robot import Robot
+    from ..timing import Discretisation
+
+__all__ = ["PathBasis", "path_basis", "row_path_jacobian"]
+
+
+class PathBasis(NamedTuple):
+    """∂θ^(o)(σ)/∂c_j of the interior control points j where the rows lie.
+
+    Attributes
+    ----------
+    knots
+        B, B', B'' (derivatives with respect to σ) at the grid knots, each (N+1, K).
+    interior
+        B' at the points inside segments where speed rows lie, (P, K).
+    """
+
+    knots: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
+    interior: NDArray[np.float64]
+
+
+def path_basis(path: BSplinePath, disc: Discretisation) -> PathBasis:
+    """The basis of a B-spline path's interior control points at a discretisation's rows."""
+    sigma = disc.problem.sigma
+    knots = tuple(path.basis(sigma, order)[:, 1:-1] for order in (0, 1, 2))
+    inside = disc.problem.interior_speed
+    at = np.zeros(0) if inside is None else inside.sigma
+    return PathBasis(knots, path.basis(at, 1)[:, 1:-1])  # type: ignore[arg-type]
+
+
+def row_path_jacobian(
+    robot: Robot, disc: Discretisation, z: NDArray[np.float64], basis: PathBasis
+) -> sp.csr_matrix:
+    """∂(rows)/∂p at the timing z: sparse, (R, K·n), columns j·n + i.
+
+    Parameters
+    ----------
+    robot
+        The arm the rows were built for.
+    disc
+        Stage 1's rows for the current path.
+    z
+        b at the free knots, shape (N−1,).
+    basis
+        The control points' basis where the rows lie (:func:`path_basis`).
+    """
+    p = disc.problem
+    n, big_n = p.dof, p.segments
+    k_count = basis.knots[0].shape[1]
+    node, seg = disc.node, disc.seg
+    b = disc.b(z)
+    lam = np.sqrt(b)
+    acc = (np.diff(b) / (2.0 * disc.ds))[seg]
+    parts: list[sp.coo_matrix] = []
+
+    # torque rows, joint-major (i·2N + r)
+    th, dth = p.theta[node], p.dtheta[node]
+    du_dq, du_dv, mass = robot.inverse_dynamics_derivatives(
+        th, lam[node, None] * dth, b[node, None] * p.ddtheta[node] + acc[:, None] * dth
+    )
+    d_order = (du_dq, lam[node, None, None] * du_dv + acc[:, None, None] * mass,
+               b[node, None, None] * mass)
+    torque = sum(
+        np.einsum("rab,rj->arjb", d, basis.knots[o][node]) for o, d in enumerate(d_order)
+    )
+    parts.append(sp.coo_matrix(torque.reshape(n * 2 * big_n, k_count * n)))
+
+    def joint_rows(rows: slice, value: NDArray[np.float64], shape: NDArray[np.float64]) -> None:
+        """Rows whose derivative is ``value`` × ``shape`` (a basis row) in their own joint."""
+        count = rows.stop - rows.start
+        joint = disc.joint[rows]
+        data = value[:, None] * shape  # (count, K)
+        r = np.repeat(np.arange(count), k_count)
+        c = (np.arange(k_count)[None, :] * n + joint[:, None]).ravel()
+        parts.append(sp.coo_matrix((data.ravel(), (r, c)), shape=(count, k_count * n)))
+
+    rows = disc.blocks.acceleration
+    sample, joint = disc.location[rows], disc.joint[rows]
+    joint_rows(rows, np.ones(sample.size),
+               acc[sample, None] * basis.knots[1][node[sample]]
+               + b[node[sample], None] * basis.knots[2][node[sample]])
+    rows = disc.blocks.speed
+    knot, joint = disc.location[rows], disc.joint[rows]
+    joint_rows(rows, 2.0 * b[knot] * p.dtheta[knot, joint], basis.knots[1][knot])
+    rows = disc.blocks.interior_speed
+    if rows.stop > rows.start:
+        inside = p.interior_speed
+        point, joint = disc.location[rows], disc.joint[rows]
+        k, w = inside.segment[point], inside.weight[point]
+        b_at = (1.0 - w) * b[k] + w * b[k + 1]
+        joint_rows(rows, 2.0 * b_at * inside.dtheta[point, joint], basis.interior[point])
+    out = sp.vstack(parts).tocsr()
+    out.eliminate_zeros()
+    return out

@@ -1,0 +1,277 @@
+"""Stage 2 by sequential convex programming: the path and its timing improved together.
+
+The path is a clamped cubic B-spline θ(σ) = Σ_j B_j(σ) c_j with c_0 = θ0 and c_{K+1} = θe; its
+interior control points p are what stage 2 moves. At the current path p⁰, timed optimally by
+stage 1 (b⁰), every row of stage 1 (:class:`~nearopt.timing.Discretisation`) is linear in b for
+the fixed path and is linearised in the path (:func:`~nearopt.planning.row_path_jacobian`):
+
+    row(b, p⁰ + Δp) ≈ row(b, p⁰) + G(b⁰) Δp.
+
+With it, stage 1's own second-order cone program (:func:`~nearopt.timing.solve_conic`) becomes a
+convex program in (b, Δp) jointly — the torques of the cost and of the limits, the accelerations
+and every joint's speed row linearised in the path, the paper's idea of linearised dynamics
+(eqs. 20-26) taken to the path's parameters. The cost keeps its exact convex form in the
+linearised torques (a Gauss-Newton model in the path, exact in the timing). A speed row
+b θ'_i² ≤ v_i² enters as b ≤ v_i²/θ'_i² with that bound's tangent in θ' (convex, so the tangent
+is conservative). Per-joint speed rows make two joints reaching their limits together a corner of
+the convex model, not a kink of a gradient. A trust region on the change of θ' (|Δp_{j,i}| ≤
+ρ·s_i/(K − 1), s_i the joint's scale) and the position limits on the control points (which keep
+the whole curve within them, convex-hull property) bound the step. The new path is re-timed
+exactly by stage 1 and accepted if its J is lower; ρ grows after steps that did as well as the
+model predicted and shrinks after poor or rejected ones. Every accepted iterate is therefore a
+path from θ0 to θe timed optimally by stage 1: feasible, at rest at both ends.
+
+The iterates are timed on the coarser grid ``SCPOptions.grid`` (64 segments by default) and the
+best path is timed on the plan's grid at the end.
+
+It stops when the model predicts no relative decrease above the tolerance (a stationary point of
+the discretised problem, to first order), when J changed by less than the tolerance in each of
+the last three iterations, when the trust region has shrunk below its minimum, or at the
+iteration / time budget.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import scipy.sparse as sp
+
+from ..cost import TorqueCost
+from ..errors import InfeasiblePathError, SolverError
+from ..path import BSplinePath
+from ..timing import Discretisation, LinearRows, is_solved, optimal_timing, solve_conic
+from .linearisation import path_basis, row_path_jacobian
+from .records import Iteration, MethodOutcome, SCPOptions, StopReason
+
+if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
+    from ..cost import Cost
+    from ..robot import Robot
+    from ..timing import TimingResult
+
+__all__ = ["sequential_convex"]
+
+
+def sequential_convex(
+    robot: Robot,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    cost: Cost,
+    *,
+    grid: int,
+    velocity_limits: bool,
+    position_limits: bool,
+    options: SCPOptions,
+    max_iterations: int,
+    deadline: float,
+    t_start: float,
+    accept: Callable[[Iteration], None],
+) -> MethodOutcome:
+    """Improve the path from the straight line by sequential convex programming.
+
+    Parameters
+    ----------
+    robot
+        The arm.
+    q0, qe
+        Start and goal [rad or m], shape (n,).
+    cost
+        The running cost (a :class:`~nearopt.TorqueCost`: the convex model needs
+        f0 = 1 + Σ w u²).
+    grid
+        Stage 1's grid for the returned path; the iterates use ``options.grid`` if coarser.
+    velocity_limits, position_limits
+        Which limits hold (position limits bound the control points).
+    options
+        The method's options.
+    max_iterations
+        Accepted iterates at most.
+    deadline
+        ``time.perf_counter()`` value after which no new iteration starts [s].
+    t_start
+        When planning started (for the iterates' wall times) [s].
+    accept
+        Called with every accepted iterate, the straight line (iterate 0) first.
+    """
+    weights = cost.torque_weights(robot.n) if isinstance(cost, TorqueCost) else None
+    if weights is None:
+        raise SolverError("sequential convex programming needs f0 = 1 + Σ w u² (a TorqueCost)")
+    n, k_count = robot.n, options.control_points
+    breaks = None
+    if options.knots == "clustered":  # where stage 1's grid is dense too: σ = ½(1 − cos πx)
+        breaks = 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, k_count)[1:-1]))
+    start = BSplinePath.line(q0, qe, k_count, breaks)
+    ends = start.control_points[[0, -1]]
+    iterate_grid = min(grid, options.grid)
+    lim = robot.limits
+    # a control point moved by δ changes θ' by about δ·(K − 1): the trust region is measured in
+    # changes of θ' relative to each joint's scale (its motion, at least 10 % of its range and
+    # 0.1 rad), where the linearisation's error grows
+    scale = np.maximum.reduce([np.abs(qe - q0), 0.1 * _range(lim), np.full(n, 0.1)])
+    scale = np.tile(scale / (k_count - 1), k_count)
+    lower = np.tile(lim.position_lower, k_count) if position_limits else np.full(n * k_count,
+                                                                                 -np.inf)
+    upper = np.tile(lim.position_upper, k_count) if position_limits else np.full(n * k_count,
+                                                                                 np.inf)
+
+    def path_of(p: NDArray[np.float64]) -> BSplinePath:
+        return BSplinePath(np.vstack([ends[:1], p.reshape(k_count, n), ends[1:]]), breaks)
+
+    def time_it(
+        p: NDArray[np.float64], guess: NDArray[np.float64] | None = None, on: int = iterate_grid
+    ) -> TimingResult:
+        return optimal_timing(robot, path_of(p), cost, grid=on,
+                              velocity_limits=velocity_limits, guess=guess)
+
+    p = start.control_points[1:-1].ravel()
+    timing = time_it(p)
+    evaluations, index, small = 1, 0, 0
+    accept(Iteration(0, timing.objective, None, timing.duration,
+                     time.perf_counter() - t_start, start))
+    basis = None
+    radius = options.trust_radius
+    reason, message = StopReason.ITERATION_LIMIT, f"{max_iterations} iterations"
+    while index < max_iterations:
+        if time.perf_counter() > deadline:
+            reason, message = StopReason.TIME_LIMIT, "the time limit was reached"
+            break
+        disc = Discretisation(timing.problem)
+        z = timing.b[1:-1]
+        if basis is None:  # the grid (knots, interior points) is the same for every iterate
+            basis = path_basis(timing.trajectory.path, disc)
+        model = _model(disc, z, row_path_jacobian(robot, disc, z, basis), radius * scale)
+        j0 = timing.objective
+        step = _solve_model(disc, weights, model, p, radius * scale, lower, upper)
+        if step is None:
+            reason, message = StopReason.SOLVER, "the convex model could not be solved"
+            break
+        dp, predicted, z_model = step
+        if j0 - predicted <= options.tolerance * abs(j0):
+            reason = StopReason.CONVERGED
+            message = (f"converged: the convex model finds no path that lowers J by more than "
+                       f"{options.tolerance:g} relative")
+            break
+        try:
+            trial = time_it(p + dp, disc.b(z_model))
+            evaluations += 1
+        except (InfeasiblePathError, SolverError):
+            trial = None
+        gain = -np.inf if trial is None else j0 - trial.objective
+        ratio = gain / (j0 - predicted)
+        reach = float(np.max(np.abs(dp) / scale))  # the step's length, as a fraction of scale
+        boundary = reach > 0.9 * radius
+        if gain > 0.0:
+            p, timing = p + dp, trial
+            index += 1
+            accept(Iteration(index, timing.objective, float(np.max(np.abs(dp))),
+                             timing.duration, time.perf_counter() - t_start,
+                             timing.trajectory.path))
+            if ratio > 0.75 and boundary:
+                radius *= 2.0
+            elif ratio < 0.25:
+                radius = 0.5 * reach
+            small = small + 1 if gain < options.tolerance * abs(j0) else 0
+            if small == 3:
+                reason = StopReason.CONVERGED
+                message = (f"converged: J changed by less than {options.tolerance:g} relative "
+                           "in each of the last 3 iterations")
+                break
+        else:
+            radius = 0.25 * reach
+        if radius < options.min_trust_radius:
+            reason = StopReason.CONVERGED
+            message = (f"converged: no step longer than {options.min_trust_radius:g} of the "
+                       "joints' scale lowers J")
+            break
+    if iterate_grid < grid:  # the returned path on the plan's own grid
+        timing = time_it(p, on=grid)
+        evaluations += 1
+    return MethodOutcome(timing, reason, message, evaluations)
+
+
+def _range(lim: object) -> NDArray[np.float64]:
+    """Each joint's position range, with 2π for joints without limits [rad]."""
+    span = lim.position_upper - lim.position_lower
+    return np.where(np.isfinite(span), span, 2.0 * np.pi)
+
+
+@dataclass(frozen=True)
+class _Model:
+    """The convex model: the torques [A_z, G] (z, Δp) + const at every sample, within
+    ``torque_limits`` where they may bind, and lower ≤ [A_z, G] (z, Δp) ≤ upper for the other
+    rows that may bind (``rows``: indices into the discretisation's)."""
+
+    rows: NDArray[np.int64]
+    matrix: sp.csr_matrix
+    lower: NDArray[np.float64]
+    upper: NDArray[np.float64]
+    torque: sp.csr_matrix
+    torque_const: NDArray[np.float64]
+    torque_limits: tuple[NDArray[np.float64], NDArray[np.float64]]
+
+
+def _model(
+    disc: Discretisation, z: NDArray[np.float64], jac: sp.csr_matrix, reach: NDArray[np.float64]
+) -> _Model:
+    """The convex model at the timing z, with the rows that can bind: those within half their
+    range (torques, accelerations) or above a quarter of their bound (speeds², i.e. half the
+    speed limit) of a limit, and those the path step alone (|Δp| ≤ ``reach``) could move by
+    half their slack."""
+    rows = disc.linear_rows(z)  # the damping's tangent at z
+    value = disc.values(z)
+    span = np.where(np.isfinite(disc.lower), 0.5 * (disc.upper - disc.lower),
+                    np.abs(disc.upper))
+    slack = np.minimum(disc.upper - value, value - disc.lower)
+    moved = abs(jac) @ reach
+    keep = (slack <= np.where(np.isfinite(disc.lower), 0.5, 0.75) * span) | (slack <= 2.0 * moved)
+    # a speed row b θ'_i² ≤ v_i² is taken in its bound form b ≤ v_i²/θ'_i², whose tangent in θ'
+    # lies below the convex bound: what the model allows, the exact row allows too
+    lower, upper = rows.lower.copy(), rows.upper.copy()
+    factor = np.ones(value.size)
+    path_factor = np.ones(value.size)
+    for block in (disc.blocks.speed, disc.blocks.interior_speed):
+        index = np.arange(block.start, block.stop)
+        slope2 = np.asarray(disc.matrix[index].sum(axis=1)).ravel()  # θ'_i² (weights sum to 1)
+        moving = (slope2 > 0.0) & (value[index] > 0.0)
+        keep[index[~moving]] = False
+        factor[index[moving]] = 1.0 / slope2[moving]
+        path_factor[index[moving]] = disc.upper[index[moving]] / value[index[moving]]
+    torque = disc.blocks.torque
+    scaled = sp.diags(factor)
+    matrix = sp.hstack([scaled @ rows.matrix, scaled @ sp.diags(path_factor) @ jac]).tocsr()
+    lower, upper = factor * lower, factor * upper
+    const = disc.upper[torque] - rows.upper[torque]
+    # the torque rows' limits become bounds of the torque variables (±inf where not kept)
+    held = keep[torque]
+    limits = (np.where(held, disc.lower[torque], -np.inf),
+              np.where(held, disc.upper[torque], np.inf))
+    keep[torque] = False
+    keep = np.flatnonzero(keep)
+    return _Model(keep, matrix[keep], lower[keep], upper[keep], matrix[torque], const, limits)
+
+
+def _solve_model(
+    disc: Discretisation,
+    weights: NDArray[np.float64],
+    model: _Model,
+    p: NDArray[np.float64],
+    radius: NDArray[np.float64],
+    lower: NDArray[np.float64],
+    upper: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], float, NDArray[np.float64]] | None:
+    """The convex model's best step Δp within the trust region, its predicted J and timing."""
+    bounds = (np.maximum(-radius, lower - p), np.minimum(radius, upper - p))
+    for tolerance in (1e-8, 1e-7, 1e-6):
+        sol = solve_conic(
+            disc.ds, weights, LinearRows(model.matrix, model.lower, model.upper),
+            (model.torque, model.torque_const), disc.z_upper, p_bounds=bounds,
+            torque_limits=model.torque_limits, tolerance=tolerance,
+        )
+        if is_solved(sol.status):
+            return np.clip(sol.p, *bounds), sol.objective, sol.z
+    return None
