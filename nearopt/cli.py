@@ -57,6 +57,10 @@ def _parser() -> argparse.ArgumentParser:
     which.add_argument("--urdf", metavar="PATH", help="a URDF file")
     p.add_argument("--lock", nargs="+", default=[], metavar="JOINT",
                    help="joints of the URDF to hold fixed (e.g. gripper fingers)")
+    p.add_argument("--tip", metavar="LINK",
+                   help="plan for the chain of joints of the URDF that ends at this link (every "
+                        "other joint held fixed at 0 within its limits)")
+    p.add_argument("--base", metavar="LINK", help="the link that chain starts from (--tip)")
     p.add_argument("--q0", nargs="+", type=float, required=True, metavar="V", help="start")
     p.add_argument("--qe", nargs="+", type=float, required=True, metavar="V", help="goal")
     p.add_argument("--deg", action="store_true", help="q0 and qe are in degrees (default rad)")
@@ -128,8 +132,13 @@ def _check_request(args: argparse.Namespace) -> None:
     """What can be checked before loading the robot: numbers and optional packages."""
     if not (np.isfinite(args.rate) and args.rate > 0):
         raise ConfigurationError(f"--rate must be a positive number of Hz, got {args.rate}")
-    if args.lock and not args.urdf:
-        raise ConfigurationError("--lock applies to --urdf (a named robot locks its own joints)")
+    for option in ("lock", "tip", "base"):
+        if getattr(args, option) and not args.urdf:
+            raise ConfigurationError(
+                f"--{option} applies to --urdf (a named robot chooses its own joints)"
+            )
+    if args.base and not args.tip:
+        raise ConfigurationError("--base needs --tip: the chain goes from the base to the tip")
     if args.plots:
         try:
             import matplotlib  # noqa: F401
@@ -148,7 +157,8 @@ def _plan_command(args: argparse.Namespace) -> None:
     robot = (
         Robot.from_name(args.robot)
         if args.robot
-        else Robot.from_urdf(args.urdf, locked_joints=tuple(args.lock))
+        else Robot.from_urdf(args.urdf, locked_joints=tuple(args.lock), tip=args.tip,
+                             base=args.base)
     )
     if args.acceleration_limit is not None:
         robot = robot.with_limits(acceleration=_per_joint(args.acceleration_limit, robot,

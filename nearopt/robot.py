@@ -92,13 +92,45 @@ class PathCoefficients(NamedTuple):
     g: NDArray[np.float64]
 
 
-def _parse_urdf(path: Path, locked: tuple[str, ...]) -> tuple[str, str, list[str], list[str]]:
+def _chain_locks(
+    root: ET.Element, path: Path, tip: str, base: str | None
+) -> tuple[str, ...]:
+    """The moving joints that are not on the kinematic chain from ``base`` (default: the root
+    link) to ``tip``."""
+    links = [link.get("name") for link in root.findall("link")]
+    for what, name in (("tip", tip), ("base", base)):
+        if name is not None and name not in links:
+            raise URDFError(
+                f"{path} has no link {name!r} (the {what}); its links: {', '.join(links)}",
+                path=str(path),
+            )
+    joints = root.findall("joint")
+    parent_joint = {j.find("child").get("link"): j for j in joints if j.find("child") is not None}
+    chain, link = set(), tip
+    while link != base and link in parent_joint:
+        chain.add(parent_joint[link].get("name"))
+        link = parent_joint[link].find("parent").get("link")
+    if base is not None and link != base:
+        raise URDFError(
+            f"link {base!r} of {path} is not above link {tip!r}: no chain joins them",
+            path=str(path),
+        )
+    return tuple(
+        j.get("name") for j in joints if j.get("type") != "fixed" and j.get("name") not in chain
+    )
+
+
+def _parse_urdf(
+    path: Path, locked: tuple[str, ...], tip: str | None = None, base: str | None = None
+) -> tuple[str, str, list[str], list[str], tuple[str, ...]]:
     """Read and check a URDF.
 
-    Returns the robot's name, the XML text for Pinocchio, the continuous joints and the joints that
-    declare no effort limit. Continuous joints become revolute joints without position limits, so
-    that θ is an angle in ℝ (Pinocchio would otherwise use (cos θ, sin θ), nq ≠ nv). A ``<limit>``
-    missing an attribute gets 0 (= undeclared) so that urdfdom accepts it and nearopt decides.
+    Returns the robot's name, the XML text for Pinocchio, the continuous joints, the joints that
+    declare no effort limit and the joints to lock (``locked`` and, with a ``tip``, every moving
+    joint off the chain from ``base`` to ``tip``). Continuous joints become revolute joints
+    without position limits, so that θ is an angle in ℝ (Pinocchio would otherwise use
+    (cos θ, sin θ), nq ≠ nv). A ``<limit>`` missing an attribute gets 0 (= undeclared) so that
+    urdfdom accepts it and nearopt decides.
     """
     if path.is_dir():
         raise URDFError(f"{path} is a directory, not a URDF file", path=str(path))
@@ -115,6 +147,9 @@ def _parse_urdf(path: Path, locked: tuple[str, ...]) -> tuple[str, str, list[str
             f"{path} is not a URDF: its root element is <{root.tag}>, not <robot>", path=str(path)
         )
     joints = {j.get("name"): j for j in root.findall("joint")}
+    if tip is not None:
+        off_chain = _chain_locks(root, path, tip, base)
+        locked = tuple(dict.fromkeys(locked + off_chain))
     unknown = [name for name in locked if name not in joints]
     if unknown:
         raise URDFError(
@@ -157,7 +192,7 @@ def _parse_urdf(path: Path, locked: tuple[str, ...]) -> tuple[str, str, list[str
         for attr in ("effort", "velocity", "lower", "upper"):
             limit.set(attr, limit.get(attr, "0"))
     name = root.get("name", path.stem)
-    return name, ET.tostring(root, encoding="unicode"), continuous, no_effort
+    return name, ET.tostring(root, encoding="unicode"), continuous, no_effort, locked
 
 
 class Robot:
@@ -220,6 +255,7 @@ class Robot:
         *,
         locked_joints: tuple[str, ...] | list[str] = (),
         tip: str | None = None,
+        base: str | None = None,
         name: str | None = None,
         effort_limit: ArrayLike | tuple[ArrayLike, ArrayLike] | None = None,
         velocity_limit: ArrayLike | None = None,
@@ -237,7 +273,12 @@ class Robot:
             Joints to hold fixed at their reference value (0 clipped to their limits), e.g. the
             fingers of a gripper.
         tip
-            The end-effector frame; by default the last body frame on the last joint.
+            A link: the arm is the chain of joints from ``base`` to it (every other moving joint
+            is locked, like ``locked_joints``), and it is the end effector the figures and the
+            viewer trace. By default no joint is locked for it and the end effector is the last
+            body frame on the last joint.
+        base
+            The link the chain to ``tip`` starts from (default: the URDF's root link).
         name
             Name of the robot; by default the URDF's ``<robot name>``.
         effort_limit, velocity_limit, position_limits, damping, acceleration_limit
@@ -250,8 +291,9 @@ class Robot:
             without inertia below it, or a joint without an effort limit and no override.
         """
         path = Path(path).expanduser().resolve()
-        locked = tuple(locked_joints)
-        robot_name, xml, continuous, no_effort = _parse_urdf(path, locked)
+        robot_name, xml, continuous, no_effort, locked = _parse_urdf(
+            path, tuple(locked_joints), tip, base
+        )
         if no_effort and effort_limit is None:
             raise URDFError(
                 f"joint {no_effort[0]!r} of {path} declares no effort limit (<limit effort>); "

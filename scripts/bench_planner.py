@@ -1,89 +1,87 @@
-"""Planner benchmark: nearopt's plan of the paper's example against CasADi + IPOPT, same problem.
+"""Planner benchmark: nearopt's plans against direct transcriptions solved by CasADi + IPOPT.
 
-The paper's example (Table 1, eqs. 31-32): the planar two-link arm from rest at θ0 = (45°, −90°)
-to rest at θe = (−90°, 0°), free final time te, |u1| ≤ 10 and |u2| ≤ 5 N m, minimising
-J = ∫ (1 + 0.03 (u1² + u2²)) dt (best known J ≈ 0.5515 at te ≈ 0.342 s). It is planned by
-:func:`nearopt.plan` and, as the reference, solved by a direct transcription: multiple shooting
-with one RK4 step per interval, piecewise-constant torques on K equal intervals of length te/K,
-te a decision variable, solved by IPOPT. The dynamics are eq. (31) written out in CasADi symbols
-and checked against Pinocchio's forward dynamics on the bundled URDF before the solve. J of the
-IPOPT solution is the continuous-time cost of its piecewise-constant torques, integrated by the
-same RK4 as an extra quadrature state; its convergence with K (measured):
+1. The paper's example (Table 1, eqs. 31-32): the planar two-link arm from rest at θ0 = (45°, −90°)
+   to rest at θe = (−90°, 0°), free final time, |u1| ≤ 10 and |u2| ≤ 5 N·m, f0 = 1 + 0.03 Σ u².
+   Planned by :func:`nearopt.plan` (default options) and, as the peer, by a direct transcription
+   written the usual way: multiple shooting, one RK4 ``Function`` of eq. (31) written out in
+   CasADi symbols, mapped over K = 100 intervals of piecewise-constant torques, te a decision
+   variable, IPOPT. Wall times (the NLP built and solved, median of ``--repeat``) in the same run,
+   and their ratio.
+2. Real arms with their URDF limits (torque, speed and position): for ur5, panda, xarm7 and
+   kinova, a "tied" motion (every joint from 30 % to 70 % of its range, clipped to ±π: equal
+   fractions of equal ranges, so the speed limits of several joints bind together) and a seeded
+   random one, each for f0 = 1 (time-optimal) and f0 = 1 + Σ 0.5 (u_i/u_max,i)² — against the
+   reference of ``scripts/ipopt_reference.py`` (the full problem by RK4 multiple shooting with the
+   same limits, several starts, re-simulated with pinocchio.aba). Prints J of the straight line,
+   of nearopt's plan and of the reference, their gap, and nearopt's wall time, iterations and
+   stage-1 solves.
+3. The path's resolution: nearopt's J against the number of interior control points K on the
+   same motions.
+4. Wall times of full plans: panda (seeded motions) and tiago's 7-joint arm.
 
-    K      J            te [s]
-    50     0.5516423    0.342151
-    100    0.5514992    0.342097
-    200    0.5514634    0.342084
-    400    0.5514545    0.342081
-    800    0.5514523    0.342081
-
-(error O(1/K²), limit ≈ 0.551452), so the default K = 200 gives J to about 1e-5; the same optimum
-is found from initial guesses te = 0.25 ... 1.0 s. Also plans a seeded random pair of configurations
-for ur5 and panda (nearopt only). Prints method, J, te, median wall time of --repeat runs (for
-IPOPT: building the NLP and solving it), iterations and, for two_link, the nearopt/IPOPT ratios.
-
-    python scripts/bench_planner.py [--K 200] [--repeat 3] [--grid 200]
+    python scripts/bench_planner.py [--repeat 3] [--intervals 60] [--starts 3] [--skip ...]
 """
 
 from __future__ import annotations
 
 import argparse
+import time
 from dataclasses import dataclass
 from typing import Any
 
 import casadi as ca
 import numpy as np
 from benchlib import median_time
+from ipopt_reference import solve_reference
 
 import nearopt
+from nearopt.catalog import package_dirs
 
 THETA_0 = np.deg2rad([45.0, -90.0])  # Table 1
 THETA_E = np.deg2rad([-90.0, 0.0])
 BETA = 0.03  # eq. (32)
 INERTIA, MASS, HALF_LENGTH, GRAVITY = 4.167e-3, 1.0, 0.1, 9.81  # Table 1
 U_MAX = np.array([10.0, 5.0])
+ARMS = ("ur5", "panda", "xarm7", "kinova")
 
 
 @dataclass(frozen=True)
-class Row:
-    """One line of the table.
+class Case:
+    """A motion of an arm and a cost.
 
     Attributes
     ----------
-    method
-        What produced it, e.g. ``"nearopt"`` or ``"IPOPT K=200"``.
-    J
-        The cost ∫ (1 + β Σ u²) dt of the motion.
-    te
-        Its duration [s].
-    wall
-        Median wall time [s].
-    iterations
-        Iterations of the optimiser.
-    status
-        How the optimiser stopped.
+    robot
+        The arm.
+    motion
+        ``"tied"`` (30 % → 70 % of every range) or ``"random"`` (seeded).
+    cost
+        ``"time"`` or ``"normalised"``.
+    q0, qe
+        Start and goal [rad].
+    weights
+        w_i of f0 = 1 + Σ w_i u_i² [1/(N·m)²].
     """
 
-    method: str
-    J: float
-    te: float
-    wall: float
-    iterations: int
-    status: str
+    robot: nearopt.Robot
+    motion: str
+    cost: str
+    q0: np.ndarray
+    qe: np.ndarray
+    weights: np.ndarray
+
+    @property
+    def label(self) -> str:
+        return f"{self.robot.name:<7}{self.motion:<8}{self.cost:<11}"
 
 
 def two_link_dynamics(q: Any, qd: Any, u: Any) -> Any:
-    """θ̈ of the paper's two-link arm, eq. (31), without friction.
+    """θ̈ of the paper's two-link arm, eq. (31), without friction, in CasADi symbols.
 
     Parameters
     ----------
     q, qd, u
-        θ [rad], θ̇ [rad/s] and the torques [N m], CasADi or NumPy vectors of length 2.
-
-    Returns
-    -------
-    Any
-        θ̈ [rad/s²] (a CasADi expression or DM).
+        θ [rad], θ̇ [rad/s] and the torques [N·m], CasADi vectors of length 2.
     """
     ml2, mgl = MASS * HALF_LENGTH**2, MASS * GRAVITY * HALF_LENGTH
     c2, s2 = ca.cos(q[1]), ca.sin(q[1])
@@ -100,28 +98,51 @@ def two_link_dynamics(q: Any, qd: Any, u: Any) -> Any:
     return ca.solve(mass_matrix, u - bias)
 
 
-def check_dynamics(robot: nearopt.Robot, samples: int = 5, tol: float = 1e-9) -> float:
-    """Compare :func:`two_link_dynamics` with Pinocchio's at seeded random states.
+def ipopt_two_link(intervals: int, te_guess: float = 0.45) -> tuple[float, float, int]:
+    """The paper's example by RK4 multiple shooting (eq. 31 in CasADi, mapped) and IPOPT.
 
-    Parameters
-    ----------
-    robot
-        The bundled ``two_link`` arm.
-    samples
-        Number of random (θ, θ̇, u).
-    tol
-        Largest acceptable difference [rad/s²].
-
-    Returns
-    -------
-    float
-        The largest difference found.
-
-    Raises
-    ------
-    RuntimeError
-        If it exceeds ``tol``.
+    Returns J (the piecewise-constant torques' cost, integrated by the same RK4), te [s] and
+    IPOPT's iterations.
     """
+    k = intervals
+    x, u, dt = ca.SX.sym("x", 5), ca.SX.sym("u", 2), ca.SX.sym("dt")
+
+    def rhs(z: Any) -> Any:
+        return ca.vertcat(z[2:4], two_link_dynamics(z[0:2], z[2:4], u), 1 + BETA * ca.sumsqr(u))
+
+    k1 = rhs(x)
+    k2 = rhs(x + dt / 2 * k1)
+    k3 = rhs(x + dt / 2 * k2)
+    k4 = rhs(x + dt * k3)
+    step = ca.Function("step", [x, u, dt], [x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
+    states, torques, te = ca.MX.sym("X", 4, k + 1), ca.MX.sym("U", 2, k), ca.MX.sym("te")
+    stepped = step.map(k)(ca.vertcat(states[:, :k], ca.MX.zeros(1, k)), torques, te / k)
+    nlp = {"x": ca.veccat(states, torques, te), "f": ca.sum2(stepped[4, :]),
+           "g": ca.veccat(stepped[:4, :] - states[:, 1:])}
+    solver = ca.nlpsol("shooting", "ipopt", nlp,
+                       {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"})
+    rest = np.zeros(2)
+    lbx = [np.full((4, k + 1), -np.inf), np.tile(-U_MAX[:, None], (1, k)), [0.01]]
+    ubx = [np.full((4, k + 1), np.inf), np.tile(U_MAX[:, None], (1, k)), [10.0]]
+    for bounds in (lbx, ubx):
+        bounds[0][:, 0] = np.r_[THETA_0, rest]
+        bounds[0][:, -1] = np.r_[THETA_E, rest]
+    s = np.linspace(0.0, 1.0, k + 1)
+    q_guess = THETA_0[:, None] + (THETA_E - THETA_0)[:, None] * s
+    qd_guess = np.tile(((THETA_E - THETA_0) / te_guess)[:, None], (1, k + 1))
+    qd_guess[:, [0, -1]] = 0.0
+    x0 = [np.vstack([q_guess, qd_guess]), np.zeros((2, k)), [te_guess]]
+
+    def flat(parts: list) -> np.ndarray:
+        return np.concatenate([np.asarray(p, dtype=float).ravel(order="F") for p in parts])
+
+    sol = solver(x0=flat(x0), lbx=flat(lbx), ubx=flat(ubx), lbg=0.0, ubg=0.0)
+    return float(sol["f"]), float(sol["x"][-1]), int(solver.stats()["iter_count"])
+
+
+def check_dynamics(robot: nearopt.Robot, samples: int = 5, tol: float = 1e-9) -> float:
+    """The largest |θ̈| difference between :func:`two_link_dynamics` and Pinocchio's forward
+    dynamics on the bundled URDF at seeded random states [rad/s²]; raises above ``tol``."""
     rng = np.random.default_rng(0)
     worst = 0.0
     for _ in range(samples):
@@ -134,163 +155,134 @@ def check_dynamics(robot: nearopt.Robot, samples: int = 5, tol: float = 1e-9) ->
     return worst
 
 
-def ipopt_two_link(K: int, te_guess: float = 0.45) -> Row:
-    """Solve the paper's example by RK4 multiple shooting with IPOPT.
-
-    Parameters
-    ----------
-    K
-        Shooting intervals (piecewise-constant torques).
-    te_guess
-        Initial guess for te [s].
-
-    Returns
-    -------
-    Row
-        The solution's continuous-time J and te, IPOPT's iteration count and return status
-        (``wall`` is 0; the caller times the call).
-    """
-    x, u, dt = ca.SX.sym("x", 5), ca.SX.sym("u", 2), ca.SX.sym("dt")
-
-    def rhs(z: Any) -> Any:
-        return ca.vertcat(z[2:4], two_link_dynamics(z[0:2], z[2:4], u), 1 + BETA * ca.sumsqr(u))
-
-    k1 = rhs(x)
-    k2 = rhs(x + dt / 2 * k1)
-    k3 = rhs(x + dt / 2 * k2)
-    k4 = rhs(x + dt * k3)
-    step = ca.Function("step", [x, u, dt], [x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
-
-    X, U, te = ca.MX.sym("X", 4, K + 1), ca.MX.sym("U", 2, K), ca.MX.sym("te")
-    stepped = step.map(K)(ca.vertcat(X[:, :K], ca.MX.zeros(1, K)), U, te / K)
-    w = ca.veccat(X, U, te)
-    g = ca.veccat(stepped[:4, :] - X[:, 1:])
-    nlp = {"x": w, "f": ca.sum2(stepped[4, :]), "g": g}
-    solver = ca.nlpsol(
-        "shooting", "ipopt", nlp,
-        {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"},
+def paper_example(repeat: int, intervals: int) -> None:
+    print(f"1. The paper's example: nearopt against IPOPT (RK4 multiple shooting of eq. 31, "
+          f"K = {intervals}, built and solved), median of {repeat}")
+    robot = nearopt.Robot.from_name("two_link")
+    print(f"eq. (31) against Pinocchio on the URDF: max |Δθ̈| = {check_dynamics(robot):.1e} rad/s²")
+    cost = nearopt.TorqueCost(BETA)
+    wall, ours = median_time(lambda: nearopt.plan(robot, THETA_0, THETA_E, cost), repeat)
+    ref_wall, (ref_j, ref_te, ref_iterations) = median_time(
+        lambda: ipopt_two_link(intervals), repeat
     )
+    print(f"{'':<22}{'J':>10}{'te [s]':>9}{'wall [s]':>10}{'iterations':>12}")
+    print(f"{'nearopt plan':<22}{ours.J:>10.6f}{ours.duration:>9.4f}{wall:>10.3f}"
+          f"{len(ours.history) - 1:>12d}   ({ours.evaluations} stage-1 solves)")
+    print(f"{f'IPOPT K={intervals}':<22}{ref_j:>10.6f}{ref_te:>9.4f}{ref_wall:>10.3f}"
+          f"{ref_iterations:>12d}")
+    print(f"ratio nearopt / IPOPT: J {ours.J / ref_j:.5f}, wall time {wall / ref_wall:.2f}\n")
 
-    rest = np.zeros(2)
-    lbx = [np.full((4, K + 1), -np.inf), np.tile(-U_MAX[:, None], (1, K)), [0.01]]
-    ubx = [np.full((4, K + 1), np.inf), np.tile(U_MAX[:, None], (1, K)), [10.0]]
-    for bounds in (lbx, ubx):
-        bounds[0][:, 0] = np.r_[THETA_0, rest]
-        bounds[0][:, -1] = np.r_[THETA_E, rest]
-    s = np.linspace(0.0, 1.0, K + 1)
-    q_guess = THETA_0[:, None] + (THETA_E - THETA_0)[:, None] * s
-    qd_guess = np.tile(((THETA_E - THETA_0) / te_guess)[:, None], (1, K + 1))
-    qd_guess[:, [0, -1]] = 0.0
-    mid = 0.5 * (q_guess[:, :-1] + q_guess[:, 1:])
-    mgl = MASS * GRAVITY * HALF_LENGTH
-    u_guess = np.vstack([
-        -mgl * (3 * np.sin(mid[0]) + np.sin(mid[0] + mid[1])),
-        -mgl * np.sin(mid[0] + mid[1]),
-    ])
-    u_guess = np.clip(u_guess, -U_MAX[:, None], U_MAX[:, None])
-    x0 = [np.vstack([q_guess, qd_guess]), u_guess, [te_guess]]
 
-    def flat(parts: list) -> np.ndarray:
-        return np.concatenate([np.asarray(p, dtype=float).ravel(order="F") for p in parts])
+def cases(arms: tuple[str, ...]) -> list[Case]:
+    """The tied and the random motion of every arm, for both costs."""
+    out = []
+    for name in arms:
+        robot = nearopt.Robot.from_name(name)
+        lim = robot.limits
+        lo = np.maximum(lim.position_lower, -np.pi)
+        hi = np.minimum(lim.position_upper, np.pi)
+        rng = np.random.default_rng(11)
+        motions = {"tied": (lo + 0.3 * (hi - lo), lo + 0.7 * (hi - lo)),
+                   "random": (rng.uniform(lo, hi), rng.uniform(lo, hi))}
+        u_max = np.maximum(np.abs(lim.effort_lower), np.abs(lim.effort_upper))
+        for motion, (q0, qe) in motions.items():
+            for cost, weights in (("time", np.zeros(robot.n)), ("normalised", 0.5 / u_max**2)):
+                out.append(Case(robot, motion, cost, q0, qe, weights))
+    return out
 
-    sol = solver(x0=flat(x0), lbx=flat(lbx), ubx=flat(ubx), lbg=0.0, ubg=0.0)
-    stats = solver.stats()
-    return Row(
-        method=f"IPOPT K={K}",
-        J=float(sol["f"]),
-        te=float(sol["x"][-1]),
-        wall=0.0,
-        iterations=int(stats["iter_count"]),
-        status=str(stats["return_status"]),
+
+def plan(case: Case, **options: Any) -> tuple[nearopt.PlanResult, float]:
+    cost = nearopt.TorqueCost(weights=case.weights)
+    start = time.perf_counter()
+    result = nearopt.plan(case.robot, case.q0, case.qe, cost, **options)
+    return result, time.perf_counter() - start
+
+
+def real_arms(all_cases: list[Case], intervals: int, starts: int) -> None:
+    print(f"2. Real arms, URDF limits: nearopt against the IPOPT reference (K = {intervals}, "
+          f"{starts} starts)")
+    print(f"{'arm    motion  cost':<26}{'J line':>10}{'J nearopt':>11}{'J IPOPT':>10}"
+          f"{'gap':>9}{'wall [s]':>10}{'iter':>6}{'stage 1':>9}{'IPOPT [s]':>11}")
+    worst = -np.inf
+    for case in all_cases:
+        result, wall = plan(case)
+        try:
+            ref = solve_reference(case.robot, case.q0, case.qe, case.weights,
+                                  intervals=intervals, starts=starts)
+            ref_j, ref_wall = ref.J, ref.wall_time
+        except RuntimeError as exc:  # no start solved: report it, go on
+            ref_j, ref_wall = np.nan, np.nan
+            print(f"   (IPOPT: {exc})")
+        gap = result.J / ref_j - 1.0
+        worst = max(worst, gap)
+        print(f"{case.label:<26}{result.initial.J:>10.5f}{result.J:>11.5f}{ref_j:>10.5f}"
+              f"{100 * gap:>8.2f}%{wall:>10.2f}{len(result.history) - 1:>6d}"
+              f"{result.evaluations:>9d}{ref_wall:>11.1f}")
+    print(f"largest gap nearopt / IPOPT: {100 * worst:+.2f} %\n")
+
+
+def resolution(all_cases: list[Case], counts: tuple[int, ...]) -> None:
+    print("3. J against the number of interior control points K (knots clustered at the ends; "
+          "relative to the largest K)")
+    print(f"{'arm    motion  cost':<26}" + "".join(f"{f'K={k}':>16}" for k in counts))
+    for case in all_cases:
+        results = [plan(case, options=nearopt.SCPOptions(control_points=k)) for k in counts]
+        best = results[-1][0].J
+        print(f"{case.label:<26}" + "".join(
+            f"{100 * (r.J / best - 1):>+9.3f}% {w:>5.1f}s" for r, w in results))
+    print()
+
+
+def wall_times(repeat: int) -> None:
+    print(f"4. Full plans at the default grid (median of {repeat} runs)")
+    print(f"{'arm':<26}{'motion':<10}{'J line':>10}{'J':>10}{'wall [s]':>10}{'iter':>6}"
+          f"{'stage 1':>9}")
+    panda = nearopt.Robot.from_name("panda")
+    tiago = nearopt.Robot.from_urdf(
+        package_dirs()[0] / "example-robot-data/robots/tiago_description/robots/tiago.urdf",
+        tip="arm_7_link", base="torso_lift_link", name="tiago arm",
     )
-
-
-def random_pair(robot: nearopt.Robot, seed: int = 11) -> tuple[np.ndarray, np.ndarray]:
-    """A seeded random θ0, θe within the position limits clipped to ±π (as in bench_timing).
-
-    Parameters
-    ----------
-    robot
-        The arm.
-    seed
-        Seed of NumPy's default generator.
-
-    Returns
-    -------
-    tuple of ndarray
-        θ0 and θe [rad].
-    """
-    rng = np.random.default_rng(seed)
-    lo = np.maximum(robot.limits.position_lower, -np.pi)
-    hi = np.minimum(robot.limits.position_upper, np.pi)
-    return rng.uniform(lo, hi), rng.uniform(lo, hi)
-
-
-def nearopt_row(robot: nearopt.Robot, q0: np.ndarray, qe: np.ndarray, repeat: int,
-                **options: Any) -> Row:
-    """Plan with :func:`nearopt.plan` for the paper's cost, ``repeat`` times.
-
-    Parameters
-    ----------
-    robot
-        The arm.
-    q0, qe
-        Start and goal [rad].
-    repeat
-        Runs; the wall time reported is their median.
-    **options
-        Passed to :func:`nearopt.plan`.
-
-    Returns
-    -------
-    Row
-        The last run's J, te, iterations and status with the median wall time.
-    """
-    wall, res = median_time(lambda: nearopt.plan(robot, q0, qe, nearopt.TorqueCost(BETA),
-                                                 **options), repeat)
-    return Row(f"nearopt {robot.name}", res.J, res.duration, wall, len(res.history) - 1,
-               res.status)
-
-
-def print_row(row: Row) -> None:
-    """Print one table line.
-
-    Parameters
-    ----------
-    row
-        The line.
-    """
-    print(f"{row.method:<20}{row.J:>11.6f}{row.te:>10.5f}{row.wall:>10.3f}{row.iterations:>7d}"
-          f"  {row.status}")
+    for robot, seeds in ((panda, range(5)), (tiago, range(3))):
+        lim = robot.limits
+        lo = np.maximum(lim.position_lower, -np.pi)
+        hi = np.minimum(lim.position_upper, np.pi)
+        u_max = np.maximum(np.abs(lim.effort_lower), np.abs(lim.effort_upper))
+        cost = nearopt.TorqueCost(weights=0.5 / u_max**2)
+        walls = []
+        for seed in seeds:
+            rng = np.random.default_rng(seed)
+            q0, qe = rng.uniform(lo, hi), rng.uniform(lo, hi)
+            wall, result = median_time(lambda q0=q0, qe=qe: nearopt.plan(robot, q0, qe, cost),
+                                       repeat)
+            walls.append(wall)
+            print(f"{robot.name:<26}{f'seed {seed}':<10}{result.initial.J:>10.5f}"
+                  f"{result.J:>10.5f}{wall:>10.2f}{len(result.history) - 1:>6d}"
+                  f"{result.evaluations:>9d}")
+        print(f"{robot.name:<26}{'median':<10}{'':>20}{np.median(walls):>10.2f}")
+    print()
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--K", type=int, default=200, help="IPOPT's shooting intervals")
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--grid", type=int, default=200, help="nearopt's grid on two_link")
-    parser.add_argument("--robots", nargs="*", default=["ur5", "panda"],
-                        help="arms planned by nearopt only")
-    parser.add_argument("--robot-grid", type=int, default=100, help="their grid")
-    parser.add_argument("--robot-iterations", type=int, default=50,
-                        help="their max_iterations")
+    parser.add_argument("--paper-intervals", type=int, default=100,
+                        help="K of the paper example's IPOPT peer")
+    parser.add_argument("--intervals", type=int, default=60, help="K of the arm references")
+    parser.add_argument("--starts", type=int, default=3, help="starts of the arm references")
+    parser.add_argument("--arms", nargs="+", default=list(ARMS))
+    parser.add_argument("--control-points", nargs="+", type=int, default=[8, 12, 16, 24, 48])
+    parser.add_argument("--skip", nargs="*", default=[], choices=["1", "2", "3", "4"],
+                        help="sections to leave out")
     args = parser.parse_args()
-
-    robot = nearopt.Robot.from_name("two_link")
-    print(f"eq. (31) vs Pinocchio: max |Δθ̈| = {check_dynamics(robot):.1e} rad/s²\n")
-    print(f"{'method':<20}{'J':>11}{'te [s]':>10}{'wall [s]':>10}{'iter':>7}  status")
-    ours = nearopt_row(robot, THETA_0, THETA_E, args.repeat, grid=args.grid)
-    print_row(ours)
-    wall, ref = median_time(lambda: ipopt_two_link(args.K), args.repeat)
-    ref = Row(ref.method, ref.J, ref.te, wall, ref.iterations, ref.status)
-    print_row(ref)
-    ratio_j, ratio_t = ours.J / ref.J, ours.wall / ref.wall
-    print(f"{'ratio nearopt/IPOPT':<20}{ratio_j:>11.6f}{'':>10}{ratio_t:>10.2f}")
-    for name in args.robots:
-        arm = nearopt.Robot.from_name(name)
-        q0, qe = random_pair(arm)
-        print_row(nearopt_row(arm, q0, qe, args.repeat, grid=args.robot_grid,
-                              max_iterations=args.robot_iterations))
+    all_cases = cases(tuple(args.arms))
+    if "1" not in args.skip:
+        paper_example(args.repeat, args.paper_intervals)
+    if "2" not in args.skip:
+        real_arms(all_cases, args.intervals, args.starts)
+    if "3" not in args.skip:
+        resolution(all_cases, tuple(args.control_points))
+    if "4" not in args.skip:
+        wall_times(args.repeat)
 
 
 if __name__ == "__main__":

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from checks import assert_independent_checks
 from conftest import ROBOT_NAMES, load, random_configuration
-from urdfs import chain_locks, erd_urdf
+from urdfs import erd_urdf
 
 import nearopt
 from nearopt.cost import CallableCost, TimeCost, TorqueCost
@@ -273,9 +273,8 @@ def test_the_reported_excesses_are_gone() -> None:
     double_pendulum = nearopt.Robot.from_urdf(
         erd_urdf("double_pendulum_description/urdf/double_pendulum.urdf"), effort_limit=2.0
     )
-    tiago_urdf = erd_urdf("tiago_description/robots/tiago.urdf")
-    tiago = nearopt.Robot.from_urdf(tiago_urdf, locked_joints=chain_locks(tiago_urdf,
-                                                                          "arm_7_link"))
+    tiago = nearopt.Robot.from_urdf(erd_urdf("tiago_description/robots/tiago.urdf"),
+                                    tip="arm_7_link")
     cases = [
         (two_link, [2 * np.pi, 0.0], [0.0, 1.0], TimeCost()),
         (double_pendulum, [0.3, -0.4], [2.0, 1.0], TimeCost()),

@@ -43,16 +43,3 @@ def erd_urdf(relative: str) -> Path:
 
     return package_dirs()[0] / "example-robot-data" / "robots" / relative
 
-
-def chain_locks(urdf: Path, tip: str) -> list[str]:
-    """The moving joints of a URDF that are not on the chain from its root to ``tip``."""
-    import xml.etree.ElementTree as ET
-
-    joints = ET.parse(urdf).getroot().findall("joint")
-    parent_joint = {j.find("child").get("link"): j for j in joints}
-    chain, link = set(), tip
-    while link in parent_joint:
-        chain.add(parent_joint[link].get("name"))
-        link = parent_joint[link].find("parent").get("link")
-    moving = [j.get("name") for j in joints if j.get("type") != "fixed"]
-    return [name for name in moving if name not in chain]

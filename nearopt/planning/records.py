@@ -84,7 +84,7 @@ class SCPOptions:
     control_points: int = 16
     knots: Literal["clustered", "uniform"] = "clustered"
     grid: int = 64
-    trust_radius: float = 0.5
+    trust_radius: float = 1.0
     min_trust_radius: float = 1e-6
     tolerance: float = 1e-4
 

@@ -123,10 +123,11 @@ def sequential_convex(
         return BSplinePath(np.vstack([ends[:1], p.reshape(k_count, n), ends[1:]]), breaks)
 
     def time_it(
-        p: NDArray[np.float64], guess: NDArray[np.float64] | None = None, on: int = iterate_grid
+        p: NDArray[np.float64], like: TimingResult | None = None,
+        guess: NDArray[np.float64] | None = None, on: int = iterate_grid,
     ) -> TimingResult:
-        return optimal_timing(robot, path_of(p), cost, grid=on,
-                              velocity_limits=velocity_limits, guess=guess)
+        return optimal_timing(robot, path_of(p), cost, grid=on, velocity_limits=velocity_limits,
+                              guess=guess, margins=None if like is None else like.problem)
 
     p = start.control_points[1:-1].ravel()
     timing = time_it(p)
@@ -157,7 +158,7 @@ def sequential_convex(
                        f"{options.tolerance:g} relative")
             break
         try:
-            trial = time_it(p + dp, disc.b(z_model))
+            trial = time_it(p + dp, timing, disc.b(z_model))
             evaluations += 1
         except (InfeasiblePathError, SolverError):
             trial = None

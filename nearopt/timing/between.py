@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from ..robot import Robot
     from .problem import TimingProblem
 
-__all__ = ["BetweenSamples", "uniform_slow_down", "tighten"]
+__all__ = ["BetweenSamples", "uniform_slow_down", "tighten", "inherit_margins"]
 
 
 class BetweenSamples:
@@ -195,4 +195,26 @@ def tighten(
         torque=tightened[0],
         acceleration=tightened[1] if len(tightened) > 1 else None,
         b_upper=b_upper,
+    )
+
+
+def inherit_margins(problem: TimingProblem, other: TimingProblem) -> TimingProblem:
+    """``problem`` with the torque and acceleration margins of ``other`` (the same grid), capped
+    so that b = 0 stays strictly inside the tightened limits."""
+    big_n = problem.segments
+    node = np.concatenate([np.arange(big_n), np.arange(1, big_n + 1)])
+    inherited = []
+    for quantity, source in zip(problem.quantities, other.quantities, strict=False):
+        if source.margin is None:
+            inherited.append(quantity)
+            continue
+        g = quantity.coef.g[node]
+        lower, upper = safe_limits(quantity)
+        room = np.minimum(upper - g, g - lower)
+        inherited.append(quantity._replace(margin=np.minimum(source.margin, 0.9 * room)))
+    inherited += list(problem.quantities[len(inherited):])
+    return replace(
+        problem,
+        torque=inherited[0],
+        acceleration=inherited[1] if len(inherited) > 1 else None,
     )

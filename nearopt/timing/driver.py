@@ -11,7 +11,7 @@ import numpy as np
 
 from ..cost import Cost, TimeCost
 from ..trajectory import Trajectory
-from .between import BetweenSamples, tighten, uniform_slow_down
+from .between import BetweenSamples, inherit_margins, tighten, uniform_slow_down
 from .problem import build_timing_problem
 from .solvers import TimingMethod, TimingStatus, solve_timing
 
@@ -78,6 +78,7 @@ def optimal_timing(
     velocity_limits: bool = True,
     tolerance: float = 1e-9,
     guess: NDArray[np.float64] | None = None,
+    margins: TimingProblem | None = None,
 ) -> TimingResult:
     """Stage 1: the timing λ(s) of a path that minimises J = ∫ f0 dt under the robot's limits.
 
@@ -100,6 +101,10 @@ def optimal_timing(
     guess
         b = (dσ/dt)² at the grid's knots of a path close to this one (e.g. the last iterate of
         stage 2), shape (N+1,): where a damping torque is first linearised.
+    margins
+        A problem on the same grid for a path close to this one, whose torque and acceleration
+        margins (where its motion bulged out between samples) this one starts from, so that it
+        is seldom tightened and solved again.
 
     Returns
     -------
@@ -114,6 +119,8 @@ def optimal_timing(
     t0 = time.perf_counter()
     cost = TimeCost() if cost is None else cost
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
+    if margins is not None and margins.sigma.size == problem.sigma.size:
+        problem = inherit_margins(problem, margins)
     sol = solve_timing(problem, cost, tolerance=tolerance, guess=guess)  # gravity at the knots
     between = BetweenSamples(robot, path, problem)  # and between them
     for _ in range(4):
