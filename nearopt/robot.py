@@ -19,7 +19,6 @@ joint damping, so Dθ̇ is added here, to the derivatives too.
 
 from __future__ import annotations
 
-import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
@@ -29,13 +28,13 @@ import pinocchio as pin
 
 from . import catalog
 from .errors import ConfigurationError, URDFError
+from .urdf import read_urdf
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
 __all__ = ["Robot", "JointLimits", "PathCoefficients"]
 
-_SUPPORTED_TYPES = ("revolute", "continuous", "prismatic", "fixed")
 _ONE_DOF_JOINTS = (
     "JointModelRX",
     "JointModelRY",
@@ -90,109 +89,6 @@ class PathCoefficients(NamedTuple):
     c: NDArray[np.float64]
     d: NDArray[np.float64]
     g: NDArray[np.float64]
-
-
-def _chain_locks(
-    root: ET.Element, path: Path, tip: str, base: str | None
-) -> tuple[str, ...]:
-    """The moving joints that are not on the kinematic chain from ``base`` (default: the root
-    link) to ``tip``."""
-    links = [link.get("name") for link in root.findall("link")]
-    for what, name in (("tip", tip), ("base", base)):
-        if name is not None and name not in links:
-            raise URDFError(
-                f"{path} has no link {name!r} (the {what}); its links: {', '.join(links)}",
-                path=str(path),
-            )
-    joints = root.findall("joint")
-    parent_joint = {j.find("child").get("link"): j for j in joints if j.find("child") is not None}
-    chain, link = set(), tip
-    while link != base and link in parent_joint:
-        chain.add(parent_joint[link].get("name"))
-        link = parent_joint[link].find("parent").get("link")
-    if base is not None and link != base:
-        raise URDFError(
-            f"link {base!r} of {path} is not above link {tip!r}: no chain joins them",
-            path=str(path),
-        )
-    return tuple(
-        j.get("name") for j in joints if j.get("type") != "fixed" and j.get("name") not in chain
-    )
-
-
-def _parse_urdf(
-    path: Path, locked: tuple[str, ...], tip: str | None = None, base: str | None = None
-) -> tuple[str, str, list[str], list[str], tuple[str, ...]]:
-    """Read and check a URDF.
-
-    Returns the robot's name, the XML text for Pinocchio, the continuous joints, the joints that
-    declare no effort limit and the joints to lock (``locked`` and, with a ``tip``, every moving
-    joint off the chain from ``base`` to ``tip``). Continuous joints become revolute joints
-    without position limits, so that θ is an angle in ℝ (Pinocchio would otherwise use
-    (cos θ, sin θ), nq ≠ nv). A ``<limit>`` missing an attribute gets 0 (= undeclared) so that
-    urdfdom accepts it and nearopt decides.
-    """
-    if path.is_dir():
-        raise URDFError(f"{path} is a directory, not a URDF file", path=str(path))
-    if not path.is_file():
-        raise URDFError(f"URDF file not found: {path}", path=str(path))
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise URDFError(f"malformed URDF {path}: {exc}", path=str(path)) from exc
-    except OSError as exc:
-        raise URDFError(f"cannot read URDF {path}: {exc}", path=str(path)) from exc
-    if root.tag != "robot":
-        raise URDFError(
-            f"{path} is not a URDF: its root element is <{root.tag}>, not <robot>", path=str(path)
-        )
-    joints = {j.get("name"): j for j in root.findall("joint")}
-    if tip is not None:
-        off_chain = _chain_locks(root, path, tip, base)
-        locked = tuple(dict.fromkeys(locked + off_chain))
-    unknown = [name for name in locked if name not in joints]
-    if unknown:
-        raise URDFError(
-            f"cannot lock joint(s) {unknown}: {path} has no such joint", path=str(path)
-        )
-    continuous, no_effort = [], []
-    for name, joint in joints.items():
-        jtype = joint.get("type")
-        if jtype in ("floating", "planar"):
-            raise URDFError(
-                f"joint {name!r} of {path} is of type {jtype!r}: floating-base robots are not "
-                "supported, nearopt plans for fixed-base arms",
-                path=str(path),
-            )
-        if jtype not in _SUPPORTED_TYPES:
-            raise URDFError(
-                f"joint {name!r} of {path} has unsupported type {jtype!r} "
-                f"(supported: {', '.join(_SUPPORTED_TYPES)})",
-                path=str(path),
-            )
-        mimic = joint.find("mimic")
-        if mimic is not None and name not in locked:
-            raise URDFError(
-                f"joint {name!r} of {path} mimics joint {mimic.get('joint')!r}: mimic joints are "
-                "not supported; lock it (locked_joints=...) to plan for the rest of the arm",
-                path=str(path),
-            )
-        if jtype == "fixed":
-            continue
-        limit = joint.find("limit")
-        if limit is None:
-            limit = ET.SubElement(joint, "limit")
-        if jtype == "continuous":
-            joint.set("type", "revolute")
-            limit.set("lower", "0")
-            limit.set("upper", "0")
-            continuous.append(name)
-        if float(limit.get("effort", "0")) <= 0.0 and name not in locked:
-            no_effort.append(name)
-        for attr in ("effort", "velocity", "lower", "upper"):
-            limit.set(attr, limit.get(attr, "0"))
-    name = root.get("name", path.stem)
-    return name, ET.tostring(root, encoding="unicode"), continuous, no_effort, locked
 
 
 class Robot:
@@ -291,7 +187,7 @@ class Robot:
             without inertia below it, or a joint without an effort limit and no override.
         """
         path = Path(path).expanduser().resolve()
-        robot_name, xml, continuous, no_effort, locked = _parse_urdf(
+        robot_name, xml, continuous, no_effort, locked = read_urdf(
             path, tuple(locked_joints), tip, base
         )
         if no_effort and effort_limit is None:
