@@ -5,14 +5,19 @@
     nearopt robots
 
 Every failure the user can cause (a bad argument, a bad URDF, an infeasible request) ends with one
-line on stderr, ``nearopt: error: …``, and exit code 2; no output file is written then. Every plan
-is verified (:func:`nearopt.verify`, at ``--rate``) before anything is written; a motion that fails
-verification ends the same way with exit code 1.
+line on stderr, ``nearopt: error: …``, and exit code 2; no output file is written then. Every
+output place is checked before planning (:mod:`nearopt.outputs`: files are replaced atomically,
+links followed, devices and FIFOs written as streams, ``-`` is the standard output). Every plan is
+verified (:func:`nearopt.verify`, at ``--rate``) before anything is written; a motion that fails
+verification ends the same way with exit code 1. Ctrl-C ends planning with the best plan so far:
+it is verified and written, and the exit code is 130; a second Ctrl-C aborts at once.
 """
 
 from __future__ import annotations
 
 import argparse
+import contextlib
+import signal
 import sys
 import time
 import warnings
@@ -24,13 +29,14 @@ import numpy as np
 from .catalog import available_robots
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, NearoptError, SamplingWarning
-from .export import check_writable, csv_text, json_text, write_all
-from .planning import METHODS, plan
+from .export import csv_text, json_text
+from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
+from .planning import METHODS, Iteration, StopReason, plan
 from .robot import Robot
 from .verify import VerificationError, verify
 
 if TYPE_CHECKING:
-    from collections.abc import Sequence
+    from collections.abc import Iterator, Sequence
 
 __all__ = ["main"]
 
@@ -61,6 +67,19 @@ def _parser() -> argparse.ArgumentParser:
                    help="plan for the chain of joints of the URDF that ends at this link (every "
                         "other joint held fixed at 0 within its limits)")
     p.add_argument("--base", metavar="LINK", help="the link that chain starts from (--tip)")
+    p.add_argument("--srdf", metavar="FILE", help="an SRDF file of the URDF (with --group)")
+    p.add_argument("--group", metavar="NAME",
+                   help="plan for the joints of this SRDF group (a chain or a list of joints)")
+    p.add_argument("--lock-at", nargs="+", default=[], metavar="JOINT=VALUE",
+                   help="values [rad or m] at which locked joints are held (default 0 within "
+                        "their limits)")
+    p.add_argument("--effort-limit", nargs="+", type=float, metavar="U",
+                   help="actuator limits |u| <= U [N·m or N]: one value or one per joint "
+                        "(default: the URDF's)")
+    p.add_argument("--velocity-limit", nargs="+", type=float, metavar="V",
+                   help="joint speed limits [rad/s or m/s]: one value or one per joint")
+    p.add_argument("--velocity-scale", type=float, metavar="F",
+                   help="multiply every joint speed limit by F")
     p.add_argument("--q0", nargs="+", type=float, required=True, metavar="V", help="start")
     p.add_argument("--qe", nargs="+", type=float, required=True, metavar="V", help="goal")
     p.add_argument("--deg", action="store_true", help="q0 and qe are in degrees (default rad)")
@@ -74,15 +93,17 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--method", choices=METHODS, default="scp", help="path update (scp)")
     p.add_argument("--grid", type=int, default=200, help="stage-1 grid segments (200)")
     p.add_argument("--max-iterations", type=int, default=200, help="iteration budget (200)")
-    p.add_argument("--time-limit", type=float, default=300.0, help="wall-time budget [s] (300)")
+    p.add_argument("--time-limit", type=float, default=300.0,
+                   help="wall-time budget [s] (300; inf: none); the best plan so far is kept")
     p.add_argument("--no-velocity-limits", action="store_true", help="ignore joint speed limits")
     p.add_argument("--acceleration-limit", nargs="+", type=float, metavar="A",
                    help="joint acceleration limits |qdd| <= A [rad/s²]: one value for every joint "
                         "or one per joint (default: none)")
     p.add_argument("--no-position-limits", action="store_true",
                    help="ignore joint position limits")
-    p.add_argument("--json", metavar="FILE", help="write the planned motion as JSON")
-    p.add_argument("--csv", metavar="FILE", help="write the same samples as CSV")
+    p.add_argument("--json", metavar="FILE",
+                   help="write the planned motion as JSON (- for the standard output)")
+    p.add_argument("--csv", metavar="FILE", help="write the same samples as CSV (- likewise)")
     p.add_argument("--rate", type=float, default=1000.0, help="JSON/CSV sampling rate [Hz] (1000)")
     p.add_argument("--plots", metavar="DIR", help="write torques.png, workspace.png, history.png")
     p.add_argument("--html", metavar="FILE", help="write the animation as a standalone HTML file")
@@ -115,30 +136,31 @@ def _cost(args: argparse.Namespace) -> Cost:
 
 
 MAX_SAMPLES = 10_000_000  # rate × te: beyond this a file would take gigabytes
-
-
-def _check_folder(target: str) -> Path:
-    folder = Path(target).expanduser()
-    if folder.exists() and not folder.is_dir():
-        raise ConfigurationError(f"cannot write figures into {target}: it is not a folder")
-    if folder.exists():
-        check_writable(folder / "torques.png")
-    else:
-        check_writable(folder)  # its parent must exist and be writable
-    return folder
+MAX_RATE = 1e6  # [Hz] a sampling rate above a megahertz is a mistake, not a controller
 
 
 def _check_request(args: argparse.Namespace) -> None:
     """What can be checked before loading the robot: numbers and optional packages."""
-    if not (np.isfinite(args.rate) and args.rate > 0):
-        raise ConfigurationError(f"--rate must be a positive number of Hz, got {args.rate}")
-    for option in ("lock", "tip", "base"):
+    if not (np.isfinite(args.rate) and 0 < args.rate <= MAX_RATE):
+        raise ConfigurationError(
+            f"--rate must be a number of Hz in (0, {MAX_RATE:.0e}], got {args.rate}"
+        )
+    if not args.time_limit > 0:
+        raise ConfigurationError(
+            f"--time-limit must be a positive number of seconds (inf: none), got {args.time_limit}"
+        )
+    for option in ("lock", "tip", "base", "lock_at", "srdf"):
         if getattr(args, option) and not args.urdf:
             raise ConfigurationError(
-                f"--{option} applies to --urdf (a named robot chooses its own joints)"
+                f"--{option.replace('_', '-')} applies to --urdf (a named robot chooses its own "
+                "joints)"
             )
     if args.base and not args.tip:
         raise ConfigurationError("--base needs --tip: the chain goes from the base to the tip")
+    if bool(args.srdf) != bool(args.group):
+        raise ConfigurationError("--srdf and --group go together: the group is read from the SRDF")
+    if args.group and args.tip:
+        raise ConfigurationError("give the arm as --tip or as an SRDF --group, not both")
     if args.plots:
         try:
             import matplotlib  # noqa: F401
@@ -148,40 +170,83 @@ def _check_request(args: argparse.Namespace) -> None:
             ) from None
 
 
-def _plan_command(args: argparse.Namespace) -> None:
+def _lock_values(pairs: list[str]) -> dict[str, float]:
+    """``--lock-at NAME=VALUE …`` as a dict."""
+    values = {}
+    for pair in pairs:
+        name, sep, value = pair.partition("=")
+        try:
+            values[name] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not name:
+            raise ConfigurationError(f"--lock-at takes JOINT=VALUE pairs, got {pair!r}")
+    return values
+
+
+def _robot(args: argparse.Namespace) -> Robot:
+    """The arm, with the limits the command line overrides."""
+    if args.robot:
+        robot = Robot.from_name(args.robot)
+    else:
+        robot = Robot.from_urdf(
+            args.urdf, locked_joints=tuple(args.lock), tip=args.tip, base=args.base,
+            lock_at=_lock_values(args.lock_at), srdf=args.srdf, group=args.group,
+            effort_limit=args.effort_limit[0] if args.effort_limit and len(args.effort_limit) == 1
+            else None,
+        )
+    overrides = {}
+    for option, key in (("effort_limit", "effort"), ("velocity_limit", "velocity"),
+                        ("acceleration_limit", "acceleration")):
+        values = getattr(args, option)
+        if values is not None:
+            overrides[key] = _per_joint(values, robot, f"--{option.replace('_', '-')}")
+    if args.velocity_scale is not None:
+        if not (np.isfinite(args.velocity_scale) and args.velocity_scale > 0):
+            raise ConfigurationError(
+                f"--velocity-scale must be a positive number, got {args.velocity_scale}"
+            )
+        base = np.asarray(overrides.get("velocity", robot.limits.velocity), dtype=float)
+        overrides["velocity"] = base * args.velocity_scale
+    return robot.with_limits(**overrides) if overrides else robot
+
+
+def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     _check_request(args)
     # every output is checked before planning, so that a bad path costs no planning time
-    targets = {key: check_writable(getattr(args, key)) for key in ("json", "csv", "html")
-               if getattr(args, key)}
-    plots = _check_folder(args.plots) if args.plots else None
-    robot = (
-        Robot.from_name(args.robot)
-        if args.robot
-        else Robot.from_urdf(args.urdf, locked_joints=tuple(args.lock), tip=args.tip,
-                             base=args.base)
-    )
-    if args.acceleration_limit is not None:
-        robot = robot.with_limits(acceleration=_per_joint(args.acceleration_limit, robot,
-                                                          "--acceleration-limit"))
+    roles = {f"--{key}": getattr(args, key) for key in ("json", "csv", "html")
+             if getattr(args, key)}
+    plots = _plots_folder(args.plots) if args.plots else None
+    if plots is not None and plots.is_dir():
+        roles.update({f"--plots {name}": plots / name for name in FIGURE_NAMES})
+    outputs = check_outputs(roles)
+    to_stdout = any(o.kind is OutputKind.STDOUT for o in outputs.values())
+    out = sys.stderr if to_stdout else sys.stdout  # the standard output may carry a file
+    robot = _robot(args)
     if args.weights is not None and len(args.weights) != robot.n:
         raise ConfigurationError(
             f"--weights needs one weight per joint of {robot.name} ({robot.n}), "
             f"got {len(args.weights)}"
         )
     q0, qe = (np.deg2rad(v) if args.deg else np.asarray(v) for v in (args.q0, args.qe))
-    result = plan(
-        robot, q0, qe, _cost(args),
-        method=args.method,
-        grid=args.grid,
-        max_iterations=0 if args.stage1_only else args.max_iterations,
-        time_limit=args.time_limit,
-        velocity_limits=not args.no_velocity_limits,
-        position_limits=not args.no_position_limits,
-        verbose=not args.quiet and not args.stage1_only,
-    )
+
+    def progress(entry: Iteration) -> None:
+        print(_format(entry), file=out, flush=True)
+
+    with interrupt.armed():
+        result = plan(
+            robot, q0, qe, _cost(args),
+            method=args.method,
+            grid=args.grid,
+            max_iterations=0 if args.stage1_only else args.max_iterations,
+            time_limit=args.time_limit,
+            velocity_limits=not args.no_velocity_limits,
+            position_limits=not args.no_position_limits,
+            callback=None if args.quiet or args.stage1_only else progress,
+        )
     print(f"{result.status}: J = {result.J:.6f} (straight line {result.initial.J:.6f}), "
           f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
-          f"{result.wall_time:.2f} s ({result.message})")
+          f"{result.wall_time:.2f} s ({result.message})", file=out)
     if args.rate * result.duration > MAX_SAMPLES:
         raise ConfigurationError(
             f"--rate {args.rate:g} Hz over te = {result.duration:.4g} s gives more than "
@@ -194,58 +259,117 @@ def _plan_command(args: argparse.Namespace) -> None:
         position_limits=not args.no_position_limits,
     )
     if args.verify:
-        print(report)
+        print(report, file=out)
     report.raise_if_failed()  # nothing is written for a motion that fails
     # everything is produced first, then written: a failure leaves no file behind
-    contents: dict[Path, str | bytes] = {}
+    contents: dict[Output, str | bytes] = {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SamplingWarning)
-        if "json" in targets:
-            contents[targets["json"]] = json_text(result, args.rate)
-        if "csv" in targets:
-            contents[targets["csv"]] = csv_text(result, args.rate)
+        if args.json:
+            contents[outputs["--json"]] = json_text(result, args.rate)
+        if args.csv:
+            contents[outputs["--csv"]] = csv_text(result, args.rate)
     for message in dict.fromkeys(str(w.message) for w in caught):
         print(f"nearopt: warning: {message}", file=sys.stderr)
-    if "html" in targets:
+    if args.html:
         from .viewer import plan_html
 
-        contents[targets["html"]] = plan_html(result)
+        contents[outputs["--html"]] = plan_html(result)
     if plots is not None:
         from .figures import render_figures
 
         rendered = render_figures(result)
         plots.mkdir(exist_ok=True)
-        contents.update({plots / name: png for name, png in rendered.items()})
-    for path in write_all(contents):
-        print(f"wrote {path}")
+        contents.update({outputs.get(f"--plots {name}") or resolve_output(plots / name): png
+                         for name, png in rendered.items()})
+    for name in write_outputs(contents):
+        print(f"wrote {name}", file=out)
     if args.show:
         from .viewer import show
 
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C ends the show
         with show(result) as viewer:
             print(f"playing at {viewer.url} (meshcat on 127.0.0.1 only); Ctrl+C stops it",
-                  flush=True)
+                  file=out, flush=True)
             try:
                 while True:
                     time.sleep(1.0)
             except KeyboardInterrupt:
                 pass
+    return 130 if result.status == StopReason.INTERRUPTED else 0
+
+
+FIGURE_NAMES = ("torques.png", "workspace.png", "history.png")
+
+
+def _plots_folder(target: str) -> Path:
+    """The figures' folder: an existing folder, or a new one in an existing folder."""
+    folder = Path(target).expanduser()
+    if folder.exists() and not folder.is_dir():
+        raise ConfigurationError(f"cannot write figures into {target}: it is not a folder")
+    if not folder.exists() and not folder.parent.is_dir():
+        raise ConfigurationError(
+            f"cannot write figures into {target}: folder {folder.parent} does not exist"
+        )
+    if not folder.exists():
+        resolve_output(folder)  # the folder can be made where it is asked for
+    return folder
+
+
+def _format(entry: Iteration) -> str:
+    step = "" if entry.alpha is None else f"{entry.alpha:.3g}"
+    return (f"iteration {entry.index:3d}  J = {entry.J:.6f}  step = {step:>8}  "
+            f"te = {entry.duration:.4f} s  {entry.wall_time:7.2f} s")
+
+
+class _Interrupt:
+    """Ctrl-C: the first SIGINT ends planning with the best plan so far (the planner turns the
+    KeyboardInterrupt into that), a second one aborts at once (exit code 130, nothing written)."""
+
+    def __init__(self) -> None:
+        self.count = 0
+
+    def _handler(self, signum: int, frame: object) -> None:
+        self.count += 1
+        if self.count > 1:
+            raise _Abort
+        raise KeyboardInterrupt
+
+    def armed(self) -> contextlib.AbstractContextManager:
+        """While planning: SIGINT raises KeyboardInterrupt once; afterwards, any SIGINT aborts."""
+        signal.signal(signal.SIGINT, self._handler)
+
+        @contextlib.contextmanager
+        def armed_once() -> Iterator[None]:
+            yield
+            self.count = max(self.count, 1)  # from here on, Ctrl-C aborts
+
+        return armed_once()
+
+
+class _Abort(BaseException):
+    """A second Ctrl-C: stop now."""
 
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``nearopt`` console script; returns the exit code."""
     args = _parser().parse_args(argv)
+    interrupt = _Interrupt()
     try:
         if args.command == "robots":
             print("\n".join(available_robots()))
-        else:
-            _plan_command(args)
+            return 0
+        return _plan_command(args, interrupt)
     except VerificationError as exc:
         _fail(str(exc), code=1)
     except NearoptError as exc:
         _fail(str(exc))
     except OSError as exc:
         _fail(f"cannot write {exc.filename or 'an output file'}: {exc.strerror or exc}")
-    return 0
+    except KeyboardInterrupt:
+        _fail("interrupted before a plan was found; nothing written", code=130)
+    except _Abort:
+        _fail("aborted by a second Ctrl-C; nothing written", code=130)
 
 
 if __name__ == "__main__":

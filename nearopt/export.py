@@ -1,8 +1,8 @@
 """A planned motion as files: JSON and CSV samples at a controller rate, written atomically.
 
 Both hold the same samples, t from 0 to t_e inclusive at ``rate`` Hz (the last step shorter), of
-θ [rad], θ̇ [rad/s], θ̈ [rad/s²] and u [N·m] (prismatic joints: m, m/s, m/s², N). A file is written
-through a temporary file in the same folder and renamed, so a failure leaves no partial file.
+θ [rad], θ̇ [rad/s], θ̈ [rad/s²] and u [N·m] (prismatic joints: m, m/s, m/s², N). Files are written
+by :mod:`nearopt.outputs` (atomically; links followed; devices and FIFOs as streams).
 """
 
 from __future__ import annotations
@@ -10,24 +10,20 @@ from __future__ import annotations
 import csv
 import io
 import json
-import os
-import tempfile
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import ConfigurationError, SamplingWarning
+from .errors import SamplingWarning
+from .outputs import write_atomically
 
 if TYPE_CHECKING:
     from .planning import PlanResult
 
 __all__ = [
     "check_sampling",
-    "check_writable",
-    "write_all",
-    "write_atomically",
     "json_text",
     "csv_text",
     "write_json",
@@ -36,52 +32,6 @@ __all__ = [
 ]
 
 KEYS = ("q", "qd", "qdd", "tau")
-
-
-def check_writable(target: str | Path) -> Path:
-    """The path, if a file can be written there; otherwise a ConfigurationError saying why."""
-    path = Path(target).expanduser()
-    folder = path.parent
-    if path.is_dir():
-        raise ConfigurationError(f"cannot write {target}: it is a directory")
-    if not folder.is_dir():
-        raise ConfigurationError(f"cannot write {target}: folder {folder} does not exist")
-    if not os.access(folder, os.W_OK) or (path.exists() and not os.access(path, os.W_OK)):
-        raise ConfigurationError(f"cannot write {target}: permission denied")
-    return path
-
-
-def write_all(contents: dict[Path, str | bytes]) -> list[Path]:
-    """Write several files all or nothing: each to a temporary file in its folder first, then
-    all renamed; if any temporary file cannot be written, none of the files is touched."""
-    staged: list[tuple[str, Path]] = []
-    umask = os.umask(0)
-    os.umask(umask)
-    try:
-        for path, content in contents.items():
-            path = check_writable(path)
-            try:
-                fd, tmp = tempfile.mkstemp(
-                    dir=path.parent, prefix=f".{path.name}.", suffix=".tmp"
-                )
-                staged.append((tmp, path))
-                with os.fdopen(fd, "wb") as handle:
-                    handle.write(content.encode("utf-8") if isinstance(content, str) else content)
-                os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600; a new file gets the usual mode
-            except OSError as exc:
-                raise ConfigurationError(f"cannot write {path}: {exc.strerror or exc}") from exc
-    except BaseException:
-        for tmp, _ in staged:
-            Path(tmp).unlink(missing_ok=True)
-        raise
-    for tmp, path in staged:
-        os.replace(tmp, path)
-    return [path for _, path in staged]
-
-
-def write_atomically(path: str | Path, content: str | bytes) -> Path:
-    """Write ``content`` (text as UTF-8, or bytes) to ``path`` via a temporary file, renamed."""
-    return write_all({Path(path): content})[0]
 
 
 def check_sampling(result: PlanResult, rate: float) -> str | None:

@@ -18,7 +18,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .export import write_atomically
+from .errors import ConfigurationError
+from .outputs import write_atomically
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -202,9 +203,23 @@ def render_figures(
 def save_figures(
     result: PlanResult, folder: str | Path, reference: dict[int, float] | None = None
 ) -> list[Path]:
-    """Write torques.png, workspace.png and history.png for a plan into ``folder``."""
-    folder = Path(folder)
-    folder.mkdir(parents=True, exist_ok=True)
+    """Write torques.png, workspace.png and history.png for a plan into ``folder`` (made if it is
+    missing, with its parents).
+
+    Raises
+    ------
+    ConfigurationError
+        If ``folder`` is a file or cannot be made.
+    """
+    folder = Path(folder).expanduser()
+    if folder.exists() and not folder.is_dir():
+        raise ConfigurationError(f"cannot write figures into {folder}: it is not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigurationError(
+            f"cannot make the folder {folder}: {exc.strerror or exc}"
+        ) from None
     return [
         write_atomically(folder / name, png)
         for name, png in render_figures(result, reference).items()

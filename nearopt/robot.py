@@ -115,6 +115,9 @@ class Robot:
         The URDF file, if any (mesh URIs are resolved relative to it).
     locked_joints
         The joints of the URDF held fixed at their reference value.
+    lock
+        The locked joints' names in ``urdf_xml`` and the configuration of the full model they are
+        held at (internal: how :meth:`visual_model` reduces the visuals like the model).
     """
 
     def __init__(
@@ -128,6 +131,7 @@ class Robot:
         urdf_xml: str | None = None,
         urdf_path: Path | None = None,
         locked_joints: tuple[str, ...] = (),
+        lock: tuple[tuple[str, ...], NDArray[np.float64]] | None = None,
     ) -> None:
         if model.nq != model.nv:
             raise URDFError(f"robot {name!r}: nq = {model.nq} ≠ nv = {model.nv}")
@@ -140,6 +144,7 @@ class Robot:
         self.urdf_xml = urdf_xml
         self.urdf_path = urdf_path
         self.locked_joints = tuple(locked_joints)
+        self._lock = lock  # the locked joints' names in urdf_xml and the full model's q there
         self._tip_id = _frame_id(model, tip, name)
         self._has_damping = bool(np.any(self.damping != 0.0))
 
@@ -152,6 +157,9 @@ class Robot:
         locked_joints: tuple[str, ...] | list[str] = (),
         tip: str | None = None,
         base: str | None = None,
+        srdf: str | Path | None = None,
+        group: str | None = None,
+        lock_at: dict[str, float] | None = None,
         name: str | None = None,
         effort_limit: ArrayLike | tuple[ArrayLike, ArrayLike] | None = None,
         velocity_limit: ArrayLike | None = None,
@@ -166,8 +174,8 @@ class Robot:
         path
             The URDF file.
         locked_joints
-            Joints to hold fixed at their reference value (0 clipped to their limits), e.g. the
-            fingers of a gripper.
+            Joints to hold fixed at their reference value (0 clipped to their limits, or
+            ``lock_at``), e.g. the fingers of a gripper; duplicates and fixed joints are ignored.
         tip
             A link: the arm is the chain of joints from ``base`` to it (every other moving joint
             is locked, like ``locked_joints``), and it is the end effector the figures and the
@@ -175,6 +183,11 @@ class Robot:
             body frame on the last joint.
         base
             The link the chain to ``tip`` starts from (default: the URDF's root link).
+        srdf, group
+            An SRDF file of the URDF and one of its groups: the arm is the group's joints (its
+            chains, joints and subgroups); every other moving joint is locked.
+        lock_at
+            Values [rad or m] at which locked joints are held, by joint name.
         name
             Name of the robot; by default the URDF's ``<robot name>``.
         effort_limit, velocity_limit, position_limits, damping, acceleration_limit
@@ -183,12 +196,19 @@ class Robot:
         Raises
         ------
         URDFError
-            Missing or malformed file, floating base, mimic or unsupported joints, a moving joint
-            without inertia below it, or a joint without an effort limit and no override.
+            Missing or malformed file, non-physical values (see :mod:`nearopt.urdf`), floating
+            base, mimic or unsupported joints, a moving joint without inertia below it, or a
+            joint without an effort limit and no override.
+        ConfigurationError
+            A ``lock_at`` joint that is not locked, or a value outside its limits.
         """
         path = Path(path).expanduser().resolve()
-        robot_name, xml, continuous, no_effort, locked = read_urdf(
-            path, tuple(locked_joints), tip, base
+        if (srdf is None) != (group is None):
+            raise ConfigurationError("give srdf and group together: the group is read from it")
+        arm = read_urdf(path, tuple(locked_joints), tip, base,
+                        None if srdf is None else Path(srdf).expanduser(), group)
+        robot_name, xml, continuous, no_effort, locked = (
+            arm.name, arm.xml, arm.continuous, arm.no_effort, arm.locked
         )
         if no_effort and effort_limit is None:
             raise URDFError(
@@ -208,11 +228,10 @@ class Robot:
                     "revolute and prismatic joints are supported",
                     path=str(path),
                 )
-        if locked:
-            q_ref = np.clip(np.zeros(full.nq), full.lowerPositionLimit, full.upperPositionLimit)
-            model = pin.buildReducedModel(full, [full.getJointId(j) for j in locked], q_ref)
-        else:
-            model = full
+        q_ref = _lock_reference(full, path, dict(zip(arm.locked, arm.locked_in_xml, strict=True)),
+                                lock_at or {})
+        ids = [full.getJointId(j) for j in arm.locked_in_xml]
+        model = pin.buildReducedModel(full, ids, q_ref) if ids else full
         names = list(model.names)[1:]
         n = model.nv
         if n == 0:
@@ -243,6 +262,7 @@ class Robot:
             urdf_xml=xml,
             urdf_path=path,
             locked_joints=locked,
+            lock=(arm.locked_in_xml, q_ref),
         )
         robot._check_inertia()
         overrides = (effort_limit, velocity_limit, position_limits, damping, acceleration_limit)
@@ -357,6 +377,7 @@ class Robot:
             urdf_xml=self.urdf_xml,
             urdf_path=self.urdf_path,
             locked_joints=self.locked_joints,
+            lock=self._lock,
         )
 
     # ------------------------------------------------------------------ description
@@ -601,11 +622,9 @@ class Robot:
             )
         except (RuntimeError, ValueError) as exc:
             raise URDFError(f"cannot load the visuals of {self.urdf_path}: {exc}") from exc
-        if self.locked_joints:
-            q_ref = np.clip(np.zeros(full.nq), full.lowerPositionLimit, full.upperPositionLimit)
-            _, geom = pin.buildReducedModel(
-                full, geom, [full.getJointId(j) for j in self.locked_joints], q_ref
-            )
+        if self._lock is not None and self._lock[0]:
+            names, q_ref = self._lock
+            _, geom = pin.buildReducedModel(full, geom, [full.getJointId(j) for j in names], q_ref)
         return geom
 
     # ------------------------------------------------------------------ checks
@@ -684,6 +703,30 @@ class Robot:
                 )
         if np.linalg.eigvalsh(h)[0] <= 0.0:
             raise URDFError(f"the inertia matrix of {self.name} is not positive definite")
+
+
+def _lock_reference(
+    full: pin.Model, path: Path, locked: dict[str, str], values: dict[str, float]
+) -> NDArray[np.float64]:
+    """The full model's configuration at which the locked joints are held: 0 within their
+    limits, or the given values (by the joints' URDF names)."""
+    q_ref = np.clip(np.zeros(full.nq), full.lowerPositionLimit, full.upperPositionLimit)
+    for name, value in values.items():
+        if name not in locked:
+            raise ConfigurationError(
+                f"lock_at names joint {name!r}, which is not locked (locked: "
+                f"{', '.join(locked) or 'none'})", joint=name,
+            )
+        jid = full.getJointId(locked[name])
+        k = full.idx_qs[jid]
+        lo, hi = full.lowerPositionLimit[k], full.upperPositionLimit[k]
+        if not np.isfinite(value) or (lo < hi and not lo <= value <= hi):
+            raise ConfigurationError(
+                f"joint {name!r} cannot be locked at {value}: its limits are [{lo:g}, {hi:g}]",
+                joint=name,
+            )
+        q_ref[k] = value
+    return q_ref
 
 
 def _frame_id(model: pin.Model, frame: str, robot: str) -> int:

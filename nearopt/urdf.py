@@ -1,23 +1,208 @@
 """Reading a URDF for nearopt: the checks, the arm's chain, the text Pinocchio builds from.
 
-:func:`read_urdf` parses the file with the standard library, checks it, turns continuous joints
-into revolute ones without position limits (θ an angle in ℝ, nq = nv) and decides which joints
-are locked; :class:`~nearopt.Robot` builds the Pinocchio model from the text it returns.
+:func:`read_urdf` parses the file with the standard library and checks what urdfdom and
+Pinocchio would accept silently or reject with the wrong cause: numbers that are not finite,
+negative masses and inertias that are not physical (not positive semi-definite, or principal
+moments that break the triangle inequality I1 + I2 ≥ I3) on links that the arm's joints move,
+position limits with lower > upper, negative
+effort or velocity limits, zero joint axes, duplicate names, joints between unknown links, links
+with two parents and kinematic loops. It turns continuous joints into revolute ones without
+position limits (θ an angle in ℝ, nq = nv) and decides which joints are locked: those asked for
+(duplicates and fixed joints ignored), every moving joint off the chain from ``base`` to ``tip``,
+or every moving joint outside an SRDF group. :class:`~nearopt.Robot` builds the Pinocchio model
+from the text it returns.
 """
 
 from __future__ import annotations
 
+import math
 import xml.etree.ElementTree as ET
-from typing import TYPE_CHECKING
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
 
 from .errors import URDFError
 
-if TYPE_CHECKING:
-    from pathlib import Path
-
-__all__ = ["read_urdf", "chain_locks", "SUPPORTED_TYPES"]
+__all__ = ["read_urdf", "chain_locks", "srdf_group_locks", "ArmDescription", "SUPPORTED_TYPES"]
 
 SUPPORTED_TYPES = ("revolute", "continuous", "prismatic", "fixed")
+
+# numeric attributes by element, checked to be finite
+_NUMBERS = {
+    "origin": ("xyz", "rpy"),
+    "mass": ("value",),
+    "inertia": ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"),
+    "axis": ("xyz",),
+    "limit": ("lower", "upper", "effort", "velocity"),
+    "dynamics": ("damping", "friction"),
+    "mimic": ("multiplier", "offset"),
+}
+
+
+@dataclass(frozen=True)
+class ArmDescription:
+    """What :func:`read_urdf` found.
+
+    Attributes
+    ----------
+    name
+        The robot's name (``<robot name>``).
+    xml
+        The URDF text Pinocchio builds the model from (continuous joints made revolute).
+    continuous
+        The joints that were continuous (no position limits).
+    no_effort
+        Moving joints, not locked, that declare no effort limit.
+    locked
+        The moving joints to lock.
+    locked_in_xml
+        Their names in ``xml`` (a locked joint that shares its name with a link is renamed).
+    """
+
+    name: str
+    xml: str
+    continuous: tuple[str, ...]
+    no_effort: tuple[str, ...]
+    locked: tuple[str, ...]
+    locked_in_xml: tuple[str, ...]
+
+
+def _error(path: Path, message: str) -> URDFError:
+    return URDFError(f"{message} ({path})", path=str(path))
+
+
+def _floats(text: str | None, path: Path, where: str) -> list[float]:
+    try:
+        values = [float(x) for x in (text or "").split()]
+    except ValueError:
+        raise _error(path, f"{where} is {text!r}, not a number") from None
+    bad = [x for x in values if not math.isfinite(x)]
+    if bad:
+        raise _error(path, f"{where} is {text!r}: not finite")
+    return values
+
+
+def _owner(element: ET.Element, parents: dict[ET.Element, ET.Element]) -> str:
+    """'link NAME' or 'joint NAME' for an element inside a link or joint."""
+    node = element
+    while node is not None and node.tag not in ("link", "joint"):
+        node = parents.get(node)
+    return "the robot" if node is None else f"{node.tag} {node.get('name')!r}"
+
+
+def _check_numbers(root: ET.Element, path: Path) -> None:
+    parents = {child: parent for parent in root.iter() for child in parent}
+    for tag, attributes in _NUMBERS.items():
+        for element in root.iter(tag):
+            for attribute in attributes:
+                if element.get(attribute) is not None:
+                    _floats(element.get(attribute), path,
+                            f"<{tag} {attribute}> of {_owner(element, parents)}")
+
+
+def _moved_links(root: ET.Element, locked: tuple[str, ...]) -> set[str]:
+    """The links below at least one moving joint that is not locked (their inertia matters)."""
+    children: dict[str, list[ET.Element]] = {}
+    for joint in root.findall("joint"):
+        children.setdefault(joint.find("parent").get("link"), []).append(joint)
+    moved: set[str] = set()
+    parents = {j.find("child").get("link") for j in root.findall("joint")}
+    frontier = [(link.get("name"), False) for link in root.findall("link")
+                if link.get("name") not in parents]
+    while frontier:
+        link, moving = frontier.pop()
+        if moving:
+            moved.add(link)
+        for joint in children.get(link, []):
+            moves = joint.get("type") != "fixed" and joint.get("name") not in locked
+            frontier.append((joint.find("child").get("link"), moving or moves))
+    return moved
+
+
+def _check_inertials(root: ET.Element, path: Path, moved: set[str]) -> None:
+    for link in root.findall("link"):
+        inertial = link.find("inertial")
+        if inertial is None or link.get("name") not in moved:
+            continue
+        name = link.get("name")
+        mass = inertial.find("mass")
+        if mass is None or mass.get("value") is None:
+            raise _error(path, f"link {name!r} has an <inertial> without a <mass value>")
+        m = float(mass.get("value"))
+        if m < 0.0:
+            raise _error(path, f"link {name!r} has a negative mass, {m:g} kg")
+        inertia = inertial.find("inertia")
+        if inertia is None:
+            continue
+        v = {k: float(inertia.get(k, "0")) for k in _NUMBERS["inertia"]}
+        matrix = np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]],
+                           [v["ixz"], v["iyz"], v["izz"]]])
+        moments = np.linalg.eigvalsh(matrix)
+        scale = float(np.max(np.abs(moments)))
+        slack = 1e-9 * scale + 1e-12  # [kg·m²] rounding; a point mass has no inertia at all
+        if moments[0] < -slack:
+            raise _error(path, f"link {name!r} has an inertia that is not positive "
+                               f"semi-definite: principal moments {np.round(moments, 9).tolist()}"
+                               " kg·m²")
+        if moments[0] + moments[1] < moments[2] - 1e-6 * scale - 1e-12:
+            raise _error(path, f"link {name!r} has principal moments of inertia "
+                               f"{np.round(moments, 9).tolist()} kg·m² that break the triangle "
+                               "inequality I1 + I2 ≥ I3 (no rigid body has them)")
+
+
+def _check_tree(root: ET.Element, path: Path) -> dict[str, ET.Element]:
+    """Unique names, joints between known links, one parent per link, no loops; returns the
+    joints by name."""
+    links = [link.get("name") for link in root.findall("link")]
+    joints = root.findall("joint")
+    if not links:
+        raise _error(path, "the robot has no <link>")
+    for kind, names in (("link", links), ("joint", [j.get("name") for j in joints])):
+        if None in names:
+            raise _error(path, f"a <{kind}> has no name")
+        seen = set()
+        for name in names:
+            if name in seen:
+                raise _error(path, f"two {kind}s are named {name!r}")
+            seen.add(name)
+    known = set(links)
+    parent_of: dict[str, str] = {}
+    for joint in joints:
+        name = joint.get("name")
+        ends = []
+        for end in ("parent", "child"):
+            element = joint.find(end)
+            link = None if element is None else element.get("link")
+            if link not in known:
+                raise _error(path, f"joint {name!r} has {end} link {link!r}, which is not a "
+                                   "<link> of the robot")
+            ends.append(link)
+        parent, child = ends
+        if child in parent_of:
+            raise _error(path, f"link {child!r} is the child of two joints, {parent_of[child]!r} "
+                               f"and {name!r}: a kinematic loop (URDF describes trees)")
+        parent_of[child] = name
+    roots = [link for link in links if link not in parent_of]
+    if not roots:
+        raise _error(path, "every link has a parent joint: the joints form a kinematic loop")
+    reached, frontier = set(roots), list(roots)
+    children: dict[str, list[str]] = {}
+    for joint in joints:
+        children.setdefault(joint.find("parent").get("link"), []).append(
+            joint.find("child").get("link"))
+    while frontier:
+        for child in children.get(frontier.pop(), []):
+            if child not in reached:
+                reached.add(child)
+                frontier.append(child)
+    loop = [link for link in links if link not in reached]
+    if loop:
+        raise _error(path, f"links {loop} form a kinematic loop: no root link reaches them")
+    if len(roots) > 1:
+        raise _error(path, f"the robot has {len(roots)} root links ({', '.join(roots)}): its "
+                           "links are not connected by joints into one tree")
+    return {j.get("name"): j for j in joints}
 
 
 def chain_locks(
@@ -33,7 +218,7 @@ def chain_locks(
                 path=str(path),
             )
     joints = root.findall("joint")
-    parent_joint = {j.find("child").get("link"): j for j in joints if j.find("child") is not None}
+    parent_joint = {j.find("child").get("link"): j for j in joints}
     chain, link = set(), tip
     while link != base and link in parent_joint:
         chain.add(parent_joint[link].get("name"))
@@ -48,17 +233,70 @@ def chain_locks(
     )
 
 
-def read_urdf(
-    path: Path, locked: tuple[str, ...], tip: str | None = None, base: str | None = None
-) -> tuple[str, str, list[str], list[str], tuple[str, ...]]:
-    """Read and check a URDF.
+def srdf_group_locks(root: ET.Element, path: Path, srdf: Path, group: str) -> tuple[str, ...]:
+    """The moving joints of the URDF outside an SRDF group (its ``<chain>``, ``<joint>`` and
+    nested ``<group>`` elements; ``<link>`` elements add the joint above each link)."""
+    try:
+        groups = {g.get("name"): g for g in ET.parse(srdf).getroot().findall("group")}
+    except (ET.ParseError, OSError) as exc:
+        raise URDFError(f"cannot read the SRDF {srdf}: {exc}", path=str(srdf)) from None
+    if group not in groups:
+        raise URDFError(f"the SRDF {srdf} has no group {group!r}; its groups: "
+                        f"{', '.join(sorted(groups)) or 'none'}", path=str(srdf))
+    joints = root.findall("joint")
+    parent_joint = {j.find("child").get("link"): j.get("name") for j in joints}
+    members: set[str] = set()
 
-    Returns the robot's name, the XML text for Pinocchio, the continuous joints, the joints that
-    declare no effort limit and the joints to lock (``locked`` and, with a ``tip``, every moving
-    joint off the chain from ``base`` to ``tip``). Continuous joints become revolute joints
-    without position limits, so that θ is an angle in ℝ (Pinocchio would otherwise use
-    (cos θ, sin θ), nq ≠ nv). A ``<limit>`` missing an attribute gets 0 (= undeclared) so that
-    urdfdom accepts it and nearopt decides.
+    def collect(name: str, seen: tuple[str, ...]) -> None:
+        if name in seen:
+            raise URDFError(f"SRDF group {name!r} of {srdf} contains itself", path=str(srdf))
+        element = groups.get(name)
+        if element is None:
+            raise URDFError(f"SRDF group {seen[-1]!r} of {srdf} refers to a group {name!r} it "
+                            "does not define", path=str(srdf))
+        for item in element:
+            if item.tag == "chain":
+                off = set(chain_locks(root, path, item.get("tip_link"), item.get("base_link")))
+                members.update(j.get("name") for j in joints if j.get("name") not in off)
+            elif item.tag == "joint":
+                members.add(item.get("name"))
+            elif item.tag == "link" and item.get("name") in parent_joint:
+                members.add(parent_joint[item.get("name")])
+            elif item.tag == "group":
+                collect(item.get("name"), (*seen, name))
+
+    collect(group, ())
+    return tuple(
+        j.get("name") for j in joints
+        if j.get("type") != "fixed" and j.get("name") not in members
+    )
+
+
+def read_urdf(
+    path: Path,
+    locked: tuple[str, ...] = (),
+    tip: str | None = None,
+    base: str | None = None,
+    srdf: Path | None = None,
+    group: str | None = None,
+) -> ArmDescription:
+    """Read and check a URDF (see the module docstring).
+
+    Parameters
+    ----------
+    path
+        The URDF file.
+    locked
+        Joints to lock by name; duplicates and fixed joints are ignored.
+    tip, base
+        Keep only the chain from ``base`` (default: the root link) to the link ``tip``.
+    srdf, group
+        Keep only the joints of this SRDF group.
+
+    Raises
+    ------
+    URDFError
+        Naming the file, the element and what is wrong with it.
     """
     if path.is_dir():
         raise URDFError(f"{path} is a directory, not a URDF file", path=str(path))
@@ -74,15 +312,21 @@ def read_urdf(
         raise URDFError(
             f"{path} is not a URDF: its root element is <{root.tag}>, not <robot>", path=str(path)
         )
-    joints = {j.get("name"): j for j in root.findall("joint")}
-    if tip is not None:
-        off_chain = chain_locks(root, path, tip, base)
-        locked = tuple(dict.fromkeys(locked + off_chain))
+    joints = _check_tree(root, path)
+    _check_numbers(root, path)
     unknown = [name for name in locked if name not in joints]
     if unknown:
+        links = {link.get("name") for link in root.findall("link")}
+        hint = " (a link has that name: lock the joint above it)" if set(unknown) & links else ""
         raise URDFError(
-            f"cannot lock joint(s) {unknown}: {path} has no such joint", path=str(path)
+            f"cannot lock joint(s) {unknown}: {path} has no such joint{hint}", path=str(path)
         )
+    if tip is not None:
+        locked += chain_locks(root, path, tip, base)
+    if group is not None:
+        locked += srdf_group_locks(root, path, Path(srdf), group)
+    locked = tuple(dict.fromkeys(n for n in locked if joints[n].get("type") != "fixed"))
+    _check_inertials(root, path, _moved_links(root, locked))
     continuous, no_effort = [], []
     for name, joint in joints.items():
         jtype = joint.get("type")
@@ -99,7 +343,9 @@ def read_urdf(
                 path=str(path),
             )
         mimic = joint.find("mimic")
-        if mimic is not None and name not in locked:
+        if mimic is not None and jtype == "fixed":  # a fixed joint follows nothing
+            joint.remove(mimic)
+        elif mimic is not None and name not in locked:
             raise URDFError(
                 f"joint {name!r} of {path} mimics joint {mimic.get('joint')!r}: mimic joints are "
                 "not supported; lock it (locked_joints=...) to plan for the rest of the arm",
@@ -107,17 +353,42 @@ def read_urdf(
             )
         if jtype == "fixed":
             continue
+        axis = joint.find("axis")
+        if axis is not None and not any(_floats(axis.get("xyz", "1 0 0"), path, "axis")):
+            raise _error(path, f"joint {name!r} has the zero axis {axis.get('xyz')!r}")
         limit = joint.find("limit")
         if limit is None:
             limit = ET.SubElement(joint, "limit")
+        for attr in ("effort", "velocity"):
+            if float(limit.get(attr, "0")) < 0.0:
+                raise _error(path, f"joint {name!r} has a negative {attr} limit "
+                                   f"{limit.get(attr)}: limits are magnitudes")
         if jtype == "continuous":
             joint.set("type", "revolute")
             limit.set("lower", "0")
             limit.set("upper", "0")
             continuous.append(name)
-        if float(limit.get("effort", "0")) <= 0.0 and name not in locked:
+        elif float(limit.get("lower", "0")) > float(limit.get("upper", "0")):
+            raise _error(path, f"joint {name!r} has position limits lower {limit.get('lower')} > "
+                               f"upper {limit.get('upper')}")
+        if float(limit.get("effort", "0")) == 0.0 and name not in locked:
             no_effort.append(name)
         for attr in ("effort", "velocity", "lower", "upper"):
             limit.set(attr, limit.get(attr, "0"))
-    name = root.get("name", path.stem)
-    return name, ET.tostring(root, encoding="unicode"), continuous, no_effort, locked
+    # Pinocchio mixes up a joint and a link of the same name when it removes the joint: a locked
+    # joint is renamed first (it leaves the model anyway)
+    links = {link.get("name") for link in root.findall("link")}
+    renamed = {name: f"{name}__locked_joint" for name in locked if name in links}
+    for name, new in renamed.items():
+        joints[name].set("name", new)
+    for mimic in root.iter("mimic"):
+        if mimic.get("joint") in renamed:
+            mimic.set("joint", renamed[mimic.get("joint")])
+    return ArmDescription(
+        name=root.get("name", path.stem),
+        xml=ET.tostring(root, encoding="unicode"),
+        continuous=tuple(continuous),
+        no_effort=tuple(no_effort),
+        locked=locked,
+        locked_in_xml=tuple(renamed.get(name, name) for name in locked),
+    )

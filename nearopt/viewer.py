@@ -36,8 +36,8 @@ from meshcat.servers.tree import SceneTree, find_node, walk
 from pinocchio.visualize import MeshcatVisualizer
 
 from .errors import ConfigurationError, NearoptError
-from .export import write_atomically
 from .figures import plane_axes, tip_path
+from .outputs import write_atomically
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray

@@ -185,7 +185,7 @@ def paper_iterations(
     max_iterations: int,
     deadline: float,
     t_start: float,
-    accept: Callable[[Iteration], None],
+    accept: Callable[[Iteration, TimingResult], None],
 ) -> MethodOutcome:
     """Section 6's loop from the straight line, with α and Δt found by a search.
 
@@ -245,7 +245,7 @@ def paper_iterations(
         gain = current.objective - best[0].objective
         current, path = best
         wall = time.perf_counter() - t_start
-        accept(Iteration(index, current.objective, alpha, current.duration, wall, path))
+        accept(Iteration(index, current.objective, alpha, current.duration, wall, path), current)
         if gain < options.tolerance * current.objective:
             reason = StopReason.CONVERGED
             message = f"converged: J changed by less than {options.tolerance:g} relative"

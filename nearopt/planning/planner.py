@@ -25,9 +25,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..cost import Cost, TimeCost, TorqueCost
-from ..errors import ConfigurationError
+from ..errors import ConfigurationError, SolverError
 from ..path import StraightPath
-from ..timing import MAX_GRID, optimal_timing
+from ..timing import MAX_GRID, TimingResult, optimal_timing
 from .paper import paper_iterations
 from .records import (
     Iteration,
@@ -93,6 +93,12 @@ def plan(
         Enforce the robot's joint speed / position limits.
     callback
         Called with every accepted :class:`Iteration`, the straight line first.
+
+    Returns
+    -------
+    PlanResult
+        The best plan found; a KeyboardInterrupt (Ctrl-C) during the iterations ends them with
+        the best plan so far (status ``StopReason.INTERRUPTED``).
     verbose
         Print one line per iteration.
 
@@ -129,11 +135,18 @@ def plan(
             "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
         )
     line = StraightPath(q0, qe)
-    initial = optimal_timing(robot, line, cost, grid=grid, velocity_limits=velocity_limits)
+    try:
+        initial = optimal_timing(robot, line, cost, grid=grid, velocity_limits=velocity_limits,
+                                 time_limit=t_start + time_limit - time.perf_counter())
+    except SolverError as exc:
+        raise SolverError(f"no plan: timing the straight line failed: {exc}",
+                          status=exc.status) from exc
     history: list[Iteration] = []
+    best: list[TimingResult] = [initial]  # the last accepted iterate's timing (the best)
 
-    def accept(entry: Iteration) -> None:
+    def accept(entry: Iteration, timing: TimingResult) -> None:
         history.append(entry)
+        best[0] = timing
         if verbose:
             print(_format(entry), flush=True)
         if callback is not None:
@@ -144,17 +157,24 @@ def plan(
                   deadline=t_start + time_limit, t_start=t_start, accept=accept)
     if max_iterations == 0 or method == Method.PAPER:
         accept(Iteration(0, initial.objective, None, initial.duration,
-                         time.perf_counter() - t_start, line))
+                         time.perf_counter() - t_start, line), initial)
     if max_iterations == 0:
         timing, reason, evaluations = initial, StopReason.ITERATION_LIMIT, 1
         message = "max_iterations = 0: the straight line, timed by stage 1"
     else:
-        if method == Method.SCP:
-            outcome = sequential_convex(robot, q0, qe, cost, **common)
-        else:
-            outcome = paper_iterations(robot, initial, cost, **common)
-        timing, reason = outcome.timing, outcome.reason
-        message, evaluations = outcome.message, outcome.evaluations + 1
+        try:
+            if method == Method.SCP:
+                outcome = sequential_convex(robot, q0, qe, cost, **common)
+            else:
+                outcome = paper_iterations(robot, initial, cost, **common)
+            timing, reason = outcome.timing, outcome.reason
+            message, evaluations = outcome.message, outcome.evaluations + 1
+        except KeyboardInterrupt:  # the best plan so far, timed on the plan's grid
+            timing, reason, evaluations = best[0], StopReason.INTERRUPTED, len(history) + 1
+            if timing.problem.segments != initial.problem.segments:
+                timing = optimal_timing(robot, timing.trajectory.path, cost, grid=grid,
+                                        velocity_limits=velocity_limits)
+            message = f"interrupted after {len(history) - 1} iterations: the best plan so far"
         if timing.J > initial.J:  # e.g. no better path: the line as a B-spline on another grid
             timing = initial
             message += "; the straight line is returned: it costs less on the plan's grid"

@@ -53,6 +53,8 @@ class StopReason(StrEnum):
     at its α and Δt search limits)."""
     SOLVER = "solver failure"
     """A convex subproblem could not be solved; the best path so far is returned."""
+    INTERRUPTED = "interrupted"
+    """Ctrl-C (KeyboardInterrupt) during planning; the best path so far is returned."""
 
 
 @dataclass(frozen=True)

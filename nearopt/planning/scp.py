@@ -70,7 +70,7 @@ def sequential_convex(
     max_iterations: int,
     deadline: float,
     t_start: float,
-    accept: Callable[[Iteration], None],
+    accept: Callable[[Iteration, TimingResult], None],
 ) -> MethodOutcome:
     """Improve the path from the straight line by sequential convex programming.
 
@@ -96,7 +96,7 @@ def sequential_convex(
     t_start
         When planning started (for the iterates' wall times) [s].
     accept
-        Called with every accepted iterate, the straight line (iterate 0) first.
+        Called with every accepted iterate and its timing, the straight line (iterate 0) first.
     """
     weights = cost.torque_weights(robot.n) if isinstance(cost, TorqueCost) else None
     if weights is None:
@@ -133,7 +133,7 @@ def sequential_convex(
     timing = time_it(p)
     evaluations, index, small = 1, 0, 0
     accept(Iteration(0, timing.objective, None, timing.duration,
-                     time.perf_counter() - t_start, start))
+                     time.perf_counter() - t_start, start), timing)
     basis = None
     radius = options.trust_radius
     reason, message = StopReason.ITERATION_LIMIT, f"{max_iterations} iterations"
@@ -171,7 +171,7 @@ def sequential_convex(
             index += 1
             accept(Iteration(index, timing.objective, float(np.max(np.abs(dp))),
                              timing.duration, time.perf_counter() - t_start,
-                             timing.trajectory.path))
+                             timing.trajectory.path), timing)
             if ratio > 0.75 and boundary:
                 radius *= 2.0
             elif ratio < 0.25:

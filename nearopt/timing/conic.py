@@ -222,7 +222,7 @@ def solve_conic(
     settings.tol_gap_abs = settings.tol_gap_rel = settings.tol_feas = tolerance
     settings.max_iter = 200
     if np.isfinite(time_limit):
-        settings.time_limit = float(max(time_limit, 1e-3))
+        settings.time_limit = float(max(time_limit, 1e-3))  # Clarabel then stops with MaxTime
     solver = clarabel.DefaultSolver(p_mat, q_vec, a_all, np.concatenate(rhs), cones, settings)
     sol = solver.solve()
     x = np.asarray(sol.x)

@@ -79,6 +79,7 @@ def optimal_timing(
     tolerance: float = 1e-9,
     guess: NDArray[np.float64] | None = None,
     margins: TimingProblem | None = None,
+    time_limit: float = np.inf,
 ) -> TimingResult:
     """Stage 1: the timing λ(s) of a path that minimises J = ∫ f0 dt under the robot's limits.
 
@@ -105,6 +106,8 @@ def optimal_timing(
         A problem on the same grid for a path close to this one, whose torque and acceleration
         margins (where its motion bulged out between samples) this one starts from, so that it
         is seldom tightened and solved again.
+    time_limit
+        Wall-time budget of the solver [s].
 
     Returns
     -------
@@ -115,13 +118,17 @@ def optimal_timing(
     ------
     InfeasiblePathError
         If gravity alone exceeds a torque limit somewhere on the path (names joint, s, θ, excess).
+    SolverError
+        If the solver fails, or the time limit runs out.
     """
     t0 = time.perf_counter()
+    deadline = t0 + time_limit
     cost = TimeCost() if cost is None else cost
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
     if margins is not None and margins.sigma.size == problem.sigma.size:
         problem = inherit_margins(problem, margins)
-    sol = solve_timing(problem, cost, tolerance=tolerance, guess=guess)  # gravity at the knots
+    sol = solve_timing(problem, cost, tolerance=tolerance, guess=guess,  # gravity at the knots
+                       time_limit=deadline - time.perf_counter())
     between = BetweenSamples(robot, path, problem)  # and between them
     for _ in range(4):
         # where the motion leaves a limit between samples: a uniform slow-down by α if that
@@ -133,7 +140,8 @@ def optimal_timing(
         if tighter is None:
             break
         problem = tighter
-        sol = solve_timing(problem, cost, tolerance=tolerance, guess=sol.b)
+        sol = solve_timing(problem, cost, tolerance=tolerance, guess=sol.b,
+                           time_limit=deadline - time.perf_counter())
     else:
         b = uniform_slow_down(between, sol.b)
     # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ

@@ -6,6 +6,7 @@ every back end reads the same rows, those of :class:`~nearopt.timing.Discretisat
 
 from __future__ import annotations
 
+import time
 import warnings
 from collections.abc import Callable
 from dataclasses import dataclass
@@ -144,6 +145,7 @@ def _solve_convex(
     """
     solutions = []
     torque_rows = disc.blocks.torque
+    deadline = time.perf_counter() + time_limit
 
     def socp(z_lin: NDArray[np.float64]) -> NDArray[np.float64]:
         rows, z_upper = disc.solver_rows(z_lin)
@@ -153,8 +155,8 @@ def _solve_convex(
         # then the same problem is solved to 10 and 100 times looser tolerances
         for tol in (tolerance, 10.0 * tolerance, 100.0 * tolerance):
             sol = solve_conic(disc.ds, weights, rows, torque, z_upper, tolerance=tol,
-                              time_limit=time_limit)
-            if is_solved(sol.status):
+                              time_limit=deadline - time.perf_counter())
+            if is_solved(sol.status) or str(sol.status) == "MaxTime":
                 break
         solutions.append(sol)
         return sol.z
@@ -163,6 +165,11 @@ def _solve_convex(
     iterations = sum(sol.iterations for sol in solutions)
     status = solutions[-1].status
     if not is_solved(status):
+        if str(status) == "MaxTime":
+            raise SolverError(
+                f"stage 1 ran out of its time limit ({time_limit:.3g} s) on a grid of "
+                f"{disc.problem.segments} segments", status=status
+            )
         raise SolverError(f"Clarabel did not solve the stage-1 SOCP: {status}", status=status)
     z = into_limits(disc, z)
     return TimingSolution(

@@ -1,0 +1,198 @@
+"""Writing outputs without destroying what is there.
+
+Every output path is resolved and checked before anything is computed (:func:`check_outputs`),
+then written all or nothing (:func:`write_outputs`):
+
+* a regular file (or a new one) is written to a temporary file in its folder and renamed over it,
+  keeping the mode of a file it replaces — a failure leaves the old file as it was;
+* a symbolic link is followed: its target is written (as above), the link stays;
+* a character or block device, a FIFO or a socket (``/dev/null``, a named pipe, ``/dev/stdout``)
+  is opened and written as a stream, never replaced;
+* ``-`` is the standard output.
+
+Two outputs to one place (after following links) are refused, and so is a folder, a missing
+folder, a read-only file system or a place the user may not write.
+"""
+
+from __future__ import annotations
+
+import os
+import stat
+import sys
+import tempfile
+from dataclasses import dataclass
+from enum import Enum
+from pathlib import Path
+
+from .errors import ConfigurationError
+
+__all__ = ["OutputKind", "Output", "resolve_output", "check_outputs", "write_outputs",
+           "write_atomically"]
+
+
+class OutputKind(Enum):
+    """How an output is written."""
+
+    FILE = "file"
+    """A regular file, written atomically (temporary file + rename)."""
+    STREAM = "stream"
+    """A device, FIFO or socket, opened and written in place."""
+    STDOUT = "stdout"
+    """The standard output (``-``)."""
+
+
+@dataclass(frozen=True)
+class Output:
+    """A checked output place.
+
+    Attributes
+    ----------
+    name
+        The path as the user gave it (for messages).
+    kind
+        How it is written.
+    path
+        Where it is written: the link's target for a symbolic link; None for the standard output.
+    identity
+        (device, inode) of what is there already, or the resolved path of a new file: what two
+        outputs to one place share.
+    """
+
+    name: str
+    kind: OutputKind
+    path: Path | None
+    identity: object
+
+
+def resolve_output(target: str | Path) -> Output:
+    """Resolve and check one output place (see the module docstring).
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the path and why it cannot be written.
+    """
+    name = str(target)
+    if name == "-":
+        info = os.fstat(sys.stdout.fileno())
+        return Output(name, OutputKind.STDOUT, None, (info.st_dev, info.st_ino))
+    path = Path(os.path.realpath(Path(name).expanduser()))
+    try:
+        info = path.stat()
+    except FileNotFoundError:
+        info = None
+    except OSError as exc:
+        raise ConfigurationError(f"cannot write {name}: {exc.strerror or exc}") from None
+    if info is not None and stat.S_ISDIR(info.st_mode):
+        raise ConfigurationError(f"cannot write {name}: it is a directory")
+    if info is not None and not stat.S_ISREG(info.st_mode):  # device, FIFO, socket
+        if not os.access(path, os.W_OK):
+            raise ConfigurationError(f"cannot write {name}: permission denied")
+        return Output(name, OutputKind.STREAM, path, (info.st_dev, info.st_ino))
+    folder = path.parent
+    if not folder.is_dir():
+        raise ConfigurationError(f"cannot write {name}: folder {folder} does not exist")
+    if info is not None and not os.access(path, os.W_OK):
+        raise ConfigurationError(f"cannot write {name}: permission denied")
+    _probe(folder, name)
+    identity = (info.st_dev, info.st_ino) if info is not None else str(path)
+    return Output(name, OutputKind.FILE, path, identity)
+
+
+def _probe(folder: Path, name: str) -> None:
+    """Create and remove a file in ``folder``: what a read-only file system, a pseudo file system
+    or missing permissions refuse (``os.access`` does not see all of them, e.g. as root)."""
+    try:
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".nearopt-probe.")
+    except OSError as exc:
+        raise ConfigurationError(f"cannot write {name}: {exc.strerror or exc}") from None
+    os.close(fd)
+    os.unlink(probe)
+
+
+def check_outputs(targets: dict[str, str | Path]) -> dict[str, Output]:
+    """Resolve and check several outputs by role (e.g. ``{"--json": "plan.json"}``).
+
+    Raises
+    ------
+    ConfigurationError
+        If one cannot be written, or two go to the same place.
+    """
+    outputs = {role: resolve_output(target) for role, target in targets.items()}
+    seen: dict[object, str] = {}
+    for role, output in outputs.items():
+        if output.identity in seen:
+            raise ConfigurationError(
+                f"{seen[output.identity]} and {role} would both write {output.name}: "
+                "give them different paths"
+            )
+        seen[output.identity] = role
+    return outputs
+
+
+def write_outputs(contents: dict[Output, str | bytes]) -> list[str]:
+    """Write every output, all or nothing for the files: each file is staged in a temporary file
+    next to it first; the streams are written next; only then are the files renamed into place.
+    If anything fails, no file is touched (a stream may have received part of its content).
+
+    Returns the names written.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the output that could not be written and why.
+    """
+    staged: list[tuple[str, Output]] = []
+    umask = os.umask(0)
+    os.umask(umask)
+    data = {output: (c.encode("utf-8") if isinstance(c, str) else c)
+            for output, c in contents.items()}
+    try:
+        for output, content in data.items():
+            if output.kind is not OutputKind.FILE:
+                continue
+            path = output.path
+            try:
+                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.",
+                                           suffix=".tmp")
+                staged.append((tmp, output))
+                with os.fdopen(fd, "wb") as handle:
+                    handle.write(content)
+                mode = path.stat().st_mode & 0o7777 if path.exists() else 0o666 & ~umask
+                os.chmod(tmp, mode)  # mkstemp makes 0600: keep the replaced file's mode
+            except OSError as exc:
+                raise ConfigurationError(
+                    f"cannot write {output.name}: {exc.strerror or exc}"
+                ) from None
+        for output, content in data.items():
+            if output.kind is OutputKind.FILE:
+                continue
+            try:
+                if output.kind is OutputKind.STDOUT:
+                    sys.stdout.flush()
+                    sys.stdout.buffer.write(content)
+                    sys.stdout.buffer.flush()
+                else:
+                    with open(output.path, "wb") as handle:
+                        handle.write(content)
+            except OSError as exc:
+                raise ConfigurationError(
+                    f"cannot write {output.name}: {exc.strerror or exc}"
+                ) from None
+    except BaseException:
+        for tmp, _ in staged:
+            Path(tmp).unlink(missing_ok=True)
+        raise
+    for tmp, output in staged:
+        os.replace(tmp, output.path)
+    return [output.name for output in data]
+
+
+def write_atomically(target: str | Path, content: str | bytes) -> Path:
+    """Write ``content`` (text as UTF-8, or bytes) to one place, as :func:`write_outputs` does.
+
+    Returns the path written (the target of a symbolic link; ``-`` for the standard output).
+    """
+    output = resolve_output(target)
+    write_outputs({output: content})
+    return output.path if output.path is not None else Path("-")
