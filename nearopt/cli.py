@@ -269,8 +269,6 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
             contents[outputs["--json"]] = json_text(result, args.rate)
         if args.csv:
             contents[outputs["--csv"]] = csv_text(result, args.rate)
-    for message in dict.fromkeys(str(w.message) for w in caught):
-        print(f"nearopt: warning: {message}", file=sys.stderr)
     if args.html:
         from .viewer import plan_html
 
@@ -284,6 +282,8 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
                          for name, png in rendered.items()})
     for name in write_outputs(contents):
         print(f"wrote {name}", file=out)
+    for message in dict.fromkeys(str(w.message) for w in caught):  # after success only
+        print(f"nearopt: warning: {message}", file=sys.stderr)
     if args.show:
         from .viewer import show
 

@@ -20,7 +20,7 @@ from .errors import ConfigurationError, NearoptError
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Cost", "TimeCost", "TorqueCost", "CallableCost"]
+__all__ = ["Cost", "TimeCost", "TorqueCost", "CallableCost", "check_cost"]
 
 @runtime_checkable
 class Cost(Protocol):
@@ -144,6 +144,13 @@ class CallableCost:
                 f"the cost {self.name!r} returned {value[k]} at θ = {q[k].tolist()}, "
                 f"θ̇ = {qd[k].tolist()}, u = {u[k].tolist()}"
             )
+        if np.any(value <= 0.0):
+            k = int(np.argmax(value <= 0.0))
+            raise NearoptError(
+                f"the cost {self.name!r} returned f0 = {value[k]:g} at θ = {q[k].tolist()}, "
+                f"θ̇ = {qd[k].tolist()}, u = {u[k].tolist()}: f0 must be positive (a motion "
+                "that costs nothing per second would be best if it never arrived)"
+            )
         return value
 
     def gradients(
@@ -177,3 +184,13 @@ class CallableCost:
 
     def describe(self) -> str:
         return self.name
+
+
+def check_cost(cost: object) -> Cost:
+    """``cost`` if it is a nearopt cost, else a ConfigurationError saying what is expected."""
+    if not isinstance(cost, TorqueCost | CallableCost) and not isinstance(cost, Cost):
+        raise ConfigurationError(
+            f"cost must be a nearopt cost — TimeCost(), TorqueCost(beta) or CallableCost(f0) "
+            f"for a function f0(θ, θ̇, u) — got {type(cost).__name__} {cost!r:.60}"
+        )
+    return cost

@@ -16,15 +16,22 @@ folder, a read-only file system or a place the user may not write.
 
 from __future__ import annotations
 
+import contextlib
 import os
+import signal
 import stat
 import sys
 import tempfile
+import threading
 from dataclasses import dataclass
 from enum import Enum
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .errors import ConfigurationError
+
+if TYPE_CHECKING:
+    from collections.abc import Iterator
 
 __all__ = ["OutputKind", "Output", "resolve_output", "check_outputs", "write_outputs",
            "write_atomically"]
@@ -76,9 +83,9 @@ def resolve_output(target: str | Path) -> Output:
     if name == "-":
         info = os.fstat(sys.stdout.fileno())
         return Output(name, OutputKind.STDOUT, None, (info.st_dev, info.st_ino))
-    path = Path(os.path.realpath(Path(name).expanduser()))
+    given = Path(name).expanduser()
     try:
-        info = path.stat()
+        info = given.stat()  # follows links
     except FileNotFoundError:
         info = None
     except OSError as exc:
@@ -86,9 +93,10 @@ def resolve_output(target: str | Path) -> Output:
     if info is not None and stat.S_ISDIR(info.st_mode):
         raise ConfigurationError(f"cannot write {name}: it is a directory")
     if info is not None and not stat.S_ISREG(info.st_mode):  # device, FIFO, socket
-        if not os.access(path, os.W_OK):
+        if not os.access(given, os.W_OK):
             raise ConfigurationError(f"cannot write {name}: permission denied")
-        return Output(name, OutputKind.STREAM, path, (info.st_dev, info.st_ino))
+        return Output(name, OutputKind.STREAM, given, (info.st_dev, info.st_ino))
+    path = Path(os.path.realpath(given))  # a link's target is what is replaced
     folder = path.parent
     if not folder.is_dir():
         raise ConfigurationError(f"cannot write {name}: folder {folder} does not exist")
@@ -183,9 +191,23 @@ def write_outputs(contents: dict[Output, str | bytes]) -> list[str]:
         for tmp, _ in staged:
             Path(tmp).unlink(missing_ok=True)
         raise
-    for tmp, output in staged:
-        os.replace(tmp, output.path)
+    with _no_interrupts():  # all renames or none, even on Ctrl-C
+        for tmp, output in staged:
+            os.replace(tmp, output.path)
     return [output.name for output in data]
+
+
+@contextlib.contextmanager
+def _no_interrupts() -> Iterator[None]:
+    """SIGINT held back (in the main thread) until the block ends."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+    try:
+        yield
+    finally:
+        signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
 
 
 def write_atomically(target: str | Path, content: str | bytes) -> Path:

@@ -213,7 +213,7 @@ class Robot:
         if no_effort and effort_limit is None:
             raise URDFError(
                 f"joint {no_effort[0]!r} of {path} declares no effort limit (<limit effort>); "
-                "pass effort_limit=... to set the actuator limits",
+                "set the actuator limits with effort_limit=... (--effort-limit)",
                 path=str(path),
             )
         try:
@@ -337,6 +337,7 @@ class Robot:
                 e_hi = self._joint_array(effort[1], "upper effort limit")
             else:
                 e_hi = self._joint_array(effort, "effort limit")
+                self._check_positive(e_hi, "effort limit")
                 e_lo = -e_hi
             self._check_order(e_lo, e_hi, "effort", strict=True)
         vel = lim.velocity

@@ -149,7 +149,8 @@ class Trajectory:
             raise ConfigurationError(f"the sampling rate must be > 0 Hz, got {rate}")
         if self.duration * rate > 1e8:
             raise ConfigurationError(
-                f"{rate:g} Hz over {self.duration:.4g} s would be more than 1e8 samples"
+                f"sampling at rate {rate:g} Hz over {self.duration:.4g} s would give more than "
+                "1e8 samples"
             )
         count = int(np.floor(self.duration * rate + 1e-9)) + 1
         t = np.arange(count) / rate

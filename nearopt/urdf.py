@@ -332,7 +332,7 @@ def read_urdf(
         jtype = joint.get("type")
         if jtype in ("floating", "planar"):
             raise URDFError(
-                f"joint {name!r} of {path} is of type {jtype!r}: floating-base robots are not "
+                f"joint {name!r} of {path} is of type {jtype!r}: a moving base is not "
                 "supported, nearopt plans for fixed-base arms",
                 path=str(path),
             )
@@ -348,7 +348,8 @@ def read_urdf(
         elif mimic is not None and name not in locked:
             raise URDFError(
                 f"joint {name!r} of {path} mimics joint {mimic.get('joint')!r}: mimic joints are "
-                "not supported; lock it (locked_joints=...) to plan for the rest of the arm",
+                "not supported; lock it (locked_joints=..., --lock) to plan for the rest of the "
+                "arm",
                 path=str(path),
             )
         if jtype == "fixed":

@@ -21,15 +21,8 @@ import numpy as np
 
 import nearopt
 from nearopt.figures import save_figures
+from nearopt.paper_example import BEST_KNOWN_J, COST, TABLE_2, THETA_0, THETA_E
 from nearopt.viewer import export_html
-
-THETA_0 = np.deg2rad([45.0, -90.0])  # Table 1
-THETA_E = np.deg2rad([-90.0, 0.0])
-COST = nearopt.TorqueCost(0.03)  # eq. (32)
-# Table 2: J^j and α for j = 0 … 6
-PAPER = [(0.95859, None), (0.72659, 0.30), (0.58449, 0.38), (0.58954, 0.01), (0.58710, 0.01),
-         (0.58204, 0.01), (0.57766, 0.01)]
-BEST_KNOWN = 0.5515  # direct multiple shooting with IPOPT (scripts/bench_planner.py)
 
 
 def table(result: nearopt.PlanResult, title: str, step: str, every: int) -> None:
@@ -42,9 +35,9 @@ def table(result: nearopt.PlanResult, title: str, step: str, every: int) -> None
         if it.index > 6 and it.index % every and it.index != last:
             continue
         alpha = "" if it.alpha is None else f"{it.alpha:.3g}"
-        paper_j, paper_a = PAPER[it.index] if it.index < len(PAPER) else (None, None)
-        paper = "" if paper_j is None else f"{paper_j:>10.5f}"
-        paper += "" if paper_a is None else f"{paper_a:>9}"
+        row = TABLE_2[it.index] if it.index < len(TABLE_2) else None
+        paper = "" if row is None else f"{row.J:>10.5f}"
+        paper += "" if row is None or row.alpha is None else f"{row.alpha:>9}"
         print(f"{it.index:>4}{it.J:>11.6f}{alpha:>10}{it.duration:>9.4f}{it.wall_time:>10.2f}   "
               f"{paper}")
     print(f"final: J = {result.J:.6f}, te = {result.duration:.4f} s, {result.status} "
@@ -71,13 +64,14 @@ def main() -> None:
     print(f"\nJ^j above is stage 1's optimum on the grid; 'final' integrates f0 over the returned "
           f"motion, timed on the 200-segment grid.\nStraight line: J0 = {default.initial.J:.6f} "
           f"(the paper's stage 1 reported "
-          f"{PAPER[0][0]}: its λ spline starts at λ = 0, so its times diverge at rest).")
-    print(f"Best plan: J = {default.J:.6f}, {100 * (default.J / PAPER[-1][0] - 1):+.2f} % against "
-          f"the paper's J6 = {PAPER[-1][0]}, {100 * (default.J / BEST_KNOWN - 1):+.3f} % against "
-          f"the best known {BEST_KNOWN} (IPOPT).")
+          f"{TABLE_2[0].J}: its λ spline starts at λ = 0, so its times diverge at rest).")
+    last = TABLE_2[-1].J
+    print(f"Best plan: J = {default.J:.6f}, {100 * (default.J / last - 1):+.2f} % against "
+          f"the paper's J6 = {last}, {100 * (default.J / BEST_KNOWN_J - 1):+.3f} % against "
+          f"the best known {BEST_KNOWN_J} (IPOPT).")
 
     args.out.mkdir(parents=True, exist_ok=True)
-    reference = {j: value for j, (value, _) in enumerate(PAPER)}
+    reference = {row.index: row.J for row in TABLE_2}
     written = [*save_figures(default, args.out, reference),
                export_html(default, args.out / "paper_example.html")]
     print("\nwrote " + ", ".join(str(p) for p in written))

@@ -36,12 +36,9 @@ from ipopt_reference import solve_reference
 
 import nearopt
 from nearopt.catalog import package_dirs
+from nearopt.paper_example import BETA, TABLE_1, THETA_0, THETA_E, eq31
 
-THETA_0 = np.deg2rad([45.0, -90.0])  # Table 1
-THETA_E = np.deg2rad([-90.0, 0.0])
-BETA = 0.03  # eq. (32)
-INERTIA, MASS, HALF_LENGTH, GRAVITY = 4.167e-3, 1.0, 0.1, 9.81  # Table 1
-U_MAX = np.array([10.0, 5.0])
+U_MAX = np.array(TABLE_1.torque_limits)
 ARMS = ("ur5", "panda", "xarm7", "kinova")
 
 
@@ -83,18 +80,10 @@ def two_link_dynamics(q: Any, qd: Any, u: Any) -> Any:
     q, qd, u
         θ [rad], θ̇ [rad/s] and the torques [N·m], CasADi vectors of length 2.
     """
-    ml2, mgl = MASS * HALF_LENGTH**2, MASS * GRAVITY * HALF_LENGTH
-    c2, s2 = ca.cos(q[1]), ca.sin(q[1])
-    m12 = INERTIA + ml2 * (1 + 2 * c2)
-    mass_matrix = ca.vertcat(
-        ca.horzcat(2 * INERTIA + 2 * ml2 * (3 + 2 * c2), m12),
-        ca.horzcat(m12, INERTIA + ml2),
-    )
-    bias = ca.vertcat(
-        -2 * ml2 * s2 * (2 * qd[0] * qd[1] + qd[1] ** 2)
-        - mgl * (3 * ca.sin(q[0]) + ca.sin(q[0] + q[1])),
-        2 * ml2 * s2 * qd[0] ** 2 - mgl * ca.sin(q[0] + q[1]),
-    )
+    (h11, h12), (h21, h22) = eq31(q, qd, sin=ca.sin, cos=ca.cos)[0]
+    coriolis, gravity = eq31(q, qd, sin=ca.sin, cos=ca.cos)[1:]
+    mass_matrix = ca.vertcat(ca.horzcat(h11, h12), ca.horzcat(h21, h22))
+    bias = ca.vertcat(coriolis[0] + gravity[0], coriolis[1] + gravity[1])
     return ca.solve(mass_matrix, u - bias)
 
 

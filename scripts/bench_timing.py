@@ -19,11 +19,12 @@ from benchlib import median_time
 
 import nearopt
 import nearopt.timing
+from nearopt.paper_example import COST, THETA_0, THETA_E
 
 
 def line(robot: nearopt.Robot) -> nearopt.StraightPath:
     if robot.name == "two_link":
-        return nearopt.StraightPath(np.deg2rad([45.0, -90.0]), np.deg2rad([-90.0, 0.0]))
+        return nearopt.StraightPath(THETA_0, THETA_E)
     rng = np.random.default_rng(11)
     lo = np.maximum(robot.limits.position_lower, -np.pi)
     hi = np.minimum(robot.limits.position_upper, np.pi)
@@ -77,7 +78,7 @@ def table(args: argparse.Namespace, accel: float) -> None:
         path = line(robot)
         for grid in args.grids:
             t_j, res_j = median_time(
-                lambda: nearopt.optimal_timing(robot, path, nearopt.TorqueCost(0.03), grid=grid),
+                lambda: nearopt.optimal_timing(robot, path, COST, grid=grid),
                 args.repeat,
             )
             t_o, res_o = median_time(

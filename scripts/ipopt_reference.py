@@ -52,6 +52,7 @@ import pinocchio as pin
 from scipy.integrate import solve_ivp
 
 import nearopt
+from nearopt.paper_example import BETA, THETA_0, THETA_E
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -1078,9 +1079,7 @@ def range_pair(robot: nearopt.Robot) -> tuple[NDArray[np.float64], NDArray[np.fl
     return lo + 0.3 * (hi - lo), lo + 0.7 * (hi - lo)
 
 
-PAPER_Q0 = np.deg2rad([45.0, -90.0])  # the paper's two-link example (Table 1)
-PAPER_QE = np.deg2rad([-90.0, 0.0])
-PAPER_BETA = 0.03  # eq. (32)
+PAPER_Q0, PAPER_QE, PAPER_BETA = THETA_0, THETA_E, BETA  # the paper's example (Table 1, eq. 32)
 
 
 def main() -> None:

@@ -11,6 +11,9 @@ import numpy as np
 import pytest
 from checks import torques_from_samples, worst_torque_excess
 from conftest import load
+from urdfs import erd_urdf
+
+import nearopt
 
 PAPER = ["--robot", "two_link", "--q0", "45", "-90", "--qe", "-90", "0", "--deg"]
 
@@ -163,3 +166,44 @@ def test_acceleration_limits_make_the_1khz_record_faithful(tmp_path: Path, name:
         elif name == "so101":  # bang phases shorter than a sample: the record misses them
             assert np.max(dv) > 10 * limit * h / 2
             assert "shorter than one sample period" in done.stderr
+
+
+SHIPPED = {  # URDFs of example-robot-data as users have them, the options they need, and the
+    # motion as fractions of every joint's range (talos: gravity alone exceeds its shoulder's
+    # effort limit with the arm held out sideways, so its motion stays low)
+    "talos_left_arm": ("talos_data/robots/talos_left_arm.urdf", [], (0.1, 0.4)),
+    "so100": ("so_arm_description/urdf/so100.urdf", [], (0.3, 0.7)),
+    "double_pendulum": ("double_pendulum_description/urdf/double_pendulum.urdf",
+                        ["--effort-limit", "2"], (0.3, 0.7)),
+    "tiago_arm": ("tiago_description/robots/tiago.urdf", ["--tip", "arm_7_link"], (0.3, 0.7)),
+}
+
+
+@pytest.mark.parametrize("name", list(SHIPPED))
+def test_shipped_urdfs_plan_from_the_command_line(tmp_path: Path, name: str) -> None:
+    """A URDF as shipped (and the option it needs) plans between two fractions of every joint's
+    range; the JSON's torques, recomputed by RNEA from its samples, meet the robot's limits."""
+    relative, options, (start, end) = SHIPPED[name]
+    path = erd_urdf(relative)
+    robot = nearopt.Robot.from_urdf(
+        path, effort_limit=2.0 if "--effort-limit" in options else None,
+        tip="arm_7_link" if "--tip" in options else None,
+    )
+    lo = np.maximum(robot.limits.position_lower, -np.pi)
+    hi = np.minimum(robot.limits.position_upper, np.pi)
+    q0, qe = lo + start * (hi - lo), lo + end * (hi - lo)
+    target = tmp_path / "plan.json"
+    done = run("plan", "--urdf", str(path), *options, "--q0", *map(str, q0), "--qe",
+               *map(str, qe), "--max-iterations", "4", "--quiet", "--json", str(target))
+    assert done.returncode == 0, done.stderr
+    doc = json.loads(target.read_text())
+    assert doc["joint_names"] == list(robot.joint_names)
+    q, qd, qdd = (np.array(doc[k]) for k in ("q", "qd", "qdd"))
+    np.testing.assert_allclose(q[0], q0, atol=1e-9)
+    np.testing.assert_allclose(q[-1], qe, atol=1e-6)
+    np.testing.assert_allclose(np.abs(qd[[0, -1]]), 0.0, atol=1e-6)
+    tau = torques_from_samples(robot, q, qd, qdd)
+    scale = np.max(robot.limits.effort_upper)
+    np.testing.assert_allclose(tau, np.array(doc["tau"]), atol=1e-6 * scale)
+    assert worst_torque_excess(robot, tau) <= 1e-6
+    assert np.all(np.abs(qd) <= robot.limits.velocity * (1 + 1e-9))

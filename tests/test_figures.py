@@ -11,14 +11,14 @@ from conftest import load
 
 import nearopt
 from nearopt.figures import plot_history, plot_torques, plot_workspace, save_figures
+from nearopt.paper_example import COST, TABLE_2, THETA_0, THETA_E
 
 matplotlib.use("Agg")
 
 
 @pytest.fixture(scope="module")
 def paper_plan() -> nearopt.PlanResult:
-    return nearopt.plan(load("two_link"), np.deg2rad([45, -90]), np.deg2rad([-90, 0]),
-                        nearopt.TorqueCost(0.03), grid=60, max_iterations=15)
+    return nearopt.plan(load("two_link"), THETA_0, THETA_E, COST, grid=60, max_iterations=15)
 
 
 def test_torque_plot_shows_the_trajectory_torques_and_the_limits(
@@ -64,10 +64,10 @@ def test_spatial_arm_gets_a_3d_workspace_plot() -> None:
 
 
 def test_history_plot_and_files(paper_plan: nearopt.PlanResult, tmp_path: Path) -> None:
-    fig = plot_history(paper_plan, {6: 0.57766})
+    fig = plot_history(paper_plan, {row.index: row.J for row in TABLE_2})
     ours, paper = fig.axes[0].get_lines()
     np.testing.assert_allclose(ours.get_ydata(), [it.J for it in paper_plan.history])
-    assert list(paper.get_xydata()[0]) == [6, 0.57766]
+    np.testing.assert_array_equal(paper.get_xydata(), [[row.index, row.J] for row in TABLE_2])
     written = save_figures(paper_plan, tmp_path / "figures")
     assert [p.name for p in written] == ["torques.png", "workspace.png", "history.png"]
     assert all(p.stat().st_size > 10_000 and p.read_bytes()[:4] == b"\x89PNG" for p in written)

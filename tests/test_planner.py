@@ -8,14 +8,12 @@ from checks import assert_independent_checks
 from conftest import load, random_configuration
 
 import nearopt
+from nearopt.paper_example import BEST_KNOWN_DURATION, BEST_KNOWN_J, TABLE_2, THETA_0, THETA_E
+from nearopt.paper_example import COST as PAPER_COST
 from nearopt.planning import nominal_motion, path_basis, row_path_jacobian, torque_gradient
 from nearopt.timing import Discretisation, build_timing_problem, solve_timing
 
-THETA_0 = np.deg2rad([45.0, -90.0])
-THETA_E = np.deg2rad([-90.0, 0.0])
-PAPER_COST = nearopt.TorqueCost(0.03)
-PAPER_J6 = 0.57766  # Table 2, after six iterations
-BEST_KNOWN = 0.55146  # direct multiple shooting with IPOPT, K = 200 (scripts/bench_planner.py)
+PAPER_J6 = TABLE_2[-1].J  # after six iterations
 
 
 def end_points(robot: nearopt.Robot, seed: int) -> tuple[np.ndarray, np.ndarray]:
@@ -121,9 +119,9 @@ def test_paper_example_beats_the_paper_and_reaches_the_best_known(
 ) -> None:
     result = paper_plan
     assert result.J < PAPER_J6
-    assert result.J <= 0.5520, result.J  # +0.1 % of the best known
-    assert result.J >= BEST_KNOWN * (1 - 1e-3)  # not below an optimum by more than IPOPT's error
-    assert result.duration == pytest.approx(0.342, abs=2e-3)
+    assert result.J <= BEST_KNOWN_J * (1 + 1e-3), result.J
+    assert result.J >= BEST_KNOWN_J * (1 - 1e-3)  # not below an optimum by more than IPOPT's error
+    assert result.duration == pytest.approx(BEST_KNOWN_DURATION, abs=2e-3)
     assert result.status == nearopt.StopReason.CONVERGED
     assert result.J < result.initial.J
 

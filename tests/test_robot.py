@@ -11,38 +11,15 @@ import yourdfpy
 from conftest import load, random_configuration
 
 import nearopt
+from nearopt.paper_example import eq31
+
 
 # ---------------------------------------------------------------- the paper's arm, eq. (31)
-M, L, INERTIA, G = 1.0, 0.1, 4.167e-3, 9.81
-
-
-def eq31(q: np.ndarray, qd: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """H, h, g of the paper's two-link arm in closed form (eq. 31)."""
-    c2, s2 = np.cos(q[1]), np.sin(q[1])
-    h11 = 2 * INERTIA + 2 * M * L**2 * (3 + 2 * c2)
-    h12 = INERTIA + M * L**2 * (1 + 2 * c2)
-    h22 = INERTIA + M * L**2
-    hmat = np.array([[h11, h12], [h12, h22]])
-    h = np.array(
-        [
-            -2 * M * L**2 * s2 * (2 * qd[0] * qd[1] + qd[1] ** 2),
-            2 * M * L**2 * s2 * qd[0] ** 2,
-        ]
-    )
-    g = np.array(
-        [
-            -M * G * L * (3 * np.sin(q[0]) + np.sin(q[0] + q[1])),
-            -M * G * L * np.sin(q[0] + q[1]),
-        ]
-    )
-    return hmat, h, g
-
-
 def test_two_link_matches_eq31(rng: np.random.Generator) -> None:
     robot = load("two_link")
     for _ in range(20):
         q, qd = rng.uniform(-np.pi, np.pi, 2), rng.normal(0, 5, 2)
-        hmat, h, g = eq31(q, qd)
+        hmat, h, g = (np.array(part) for part in eq31(q, qd))
         np.testing.assert_allclose(robot.mass_matrix(q), hmat, rtol=0, atol=1e-9)
         np.testing.assert_allclose(robot.coriolis(q, qd), h, rtol=0, atol=1e-9)
         np.testing.assert_allclose(robot.gravity_torque(q), g, rtol=0, atol=1e-9)

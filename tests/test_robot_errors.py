@@ -50,7 +50,7 @@ def test_unknown_robot_name_lists_the_known_ones() -> None:
 @pytest.mark.parametrize("jtype", ["floating", "planar"])
 def test_floating_base_is_rejected(tmp_path: Path, jtype: str) -> None:
     path = write_urdf(tmp_path, types=(jtype, "revolute"))
-    with pytest.raises(URDFError, match=f"joint 'j1'.*{jtype}.*floating-base"):
+    with pytest.raises(URDFError, match=f"joint 'j1'.*{jtype}.*moving base"):
         nearopt.Robot.from_urdf(path)
 
 

@@ -8,9 +8,7 @@ from conftest import load
 
 import nearopt
 from nearopt import Trajectory, VerificationError, verify
-
-COST = nearopt.TorqueCost(0.03)
-THETA_0, THETA_E = np.deg2rad([45.0, -90.0]), np.deg2rad([-90.0, 0.0])
+from nearopt.paper_example import COST, THETA_0, THETA_E
 
 
 @pytest.fixture(scope="module")

@@ -11,6 +11,7 @@ import pytest
 from conftest import load
 
 import nearopt
+from nearopt.paper_example import COST, THETA_0, THETA_E
 from nearopt.viewer import export_html, show
 
 CHROMIUM = Path("/usr/bin/chromium")
@@ -24,8 +25,7 @@ def plans() -> dict[str, nearopt.PlanResult]:
     """Short plans: the paper's example and a panda motion (a few iterations suffice here)."""
     return {
         "two_link": nearopt.plan(
-            load("two_link"), np.deg2rad([45, -90]), np.deg2rad([-90, 0]),
-            nearopt.TorqueCost(0.03), grid=60, max_iterations=20,
+            load("two_link"), THETA_0, THETA_E, COST, grid=60, max_iterations=20,
         ),
         "panda": nearopt.plan(
             load("panda"), [0, -0.5, 0, -2, 0, 1.5, 0.8], [1, 0, 0.5, -1.5, 0, 2, 0],

@@ -118,6 +118,8 @@ def torque_gradient(
     sol = solve_ivp(
         costate, (t[-1], t[0]), p_end, t_eval=t[::-1], rtol=1e-9, atol=1e-12, method="DOP853"
     )
+    if not sol.success or sol.y.shape[1] != t.size:
+        raise SolverError(f"the costate of eq. (23) could not be integrated: {sol.message}")
     p = sol.y[:, ::-1].T
     return np.einsum("kij,ki->kj", b, p) + df_du
 
@@ -214,7 +216,10 @@ def paper_iterations(
             for sign in (1.0, -1.0):
                 horizon = current.duration * (1.0 + sign * delta_t)
                 t, x, u = nominal_motion(robot, current.trajectory, horizon)
-                eta = torque_gradient(robot, t, x, u, cost, target, options.gamma)
+                try:
+                    eta = torque_gradient(robot, t, x, u, cost, target, options.gamma)
+                except SolverError:
+                    continue
                 u_star = np.clip(u - alpha * eta, lim.effort_lower, lim.effort_upper)
                 candidate = boundary_value_path(robot, t, x, u_star, q0, qe)
                 if candidate is None:

@@ -24,9 +24,10 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..cost import Cost, TimeCost, TorqueCost
+from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import ConfigurationError, SolverError
 from ..path import StraightPath
+from ..robot import Robot
 from ..timing import MAX_GRID, TimingResult, optimal_timing
 from .paper import paper_iterations
 from .records import (
@@ -41,8 +42,6 @@ from .scp import sequential_convex
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
-
-    from ..robot import Robot
 
 __all__ = ["plan", "METHODS", "MAX_CONTROL_POINTS"]
 
@@ -110,7 +109,12 @@ def plan(
         If the straight line itself cannot be timed (gravity exceeds a limit along it).
     """
     t_start = time.perf_counter()
-    cost = TimeCost() if cost is None else cost
+    if not isinstance(robot, Robot):
+        raise ConfigurationError(
+            f"robot must be a nearopt.Robot (e.g. Robot.from_name('two_link') or "
+            f"Robot.from_urdf(path)), got {type(robot).__name__} {robot!r:.60}"
+        )
+    cost = TimeCost() if cost is None else check_cost(cost)
     method, options = _check_method(method, options, cost)
     for name, value, low, high in (
         ("max_iterations", max_iterations, 0, np.inf),
@@ -238,6 +242,10 @@ def _check_method(
             value = getattr(options, name)
             if not (np.isfinite(value) and value > 0):
                 raise ConfigurationError(f"{name} must be a positive number, got {value}")
+        if not isinstance(options.trials, int | np.integer) or not 1 <= options.trials <= 100:
+            raise ConfigurationError(
+                f"trials must be an integer from 1 to 100, got {options.trials!r}"
+            )
     return method, options
 
 

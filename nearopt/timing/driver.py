@@ -9,7 +9,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..cost import Cost, TimeCost
+from ..cost import Cost, TimeCost, check_cost
+from ..errors import ConfigurationError
+from ..path import Path
 from ..trajectory import Trajectory
 from .between import BetweenSamples, inherit_margins, tighten, uniform_slow_down
 from .problem import build_timing_problem
@@ -18,7 +20,6 @@ from .solvers import TimingMethod, TimingStatus, solve_timing
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from ..path import Path
     from ..robot import Robot
     from .problem import TimingProblem
 
@@ -123,7 +124,12 @@ def optimal_timing(
     """
     t0 = time.perf_counter()
     deadline = t0 + time_limit
-    cost = TimeCost() if cost is None else cost
+    cost = TimeCost() if cost is None else check_cost(cost)
+    if not isinstance(path, Path):
+        raise ConfigurationError(
+            "path must be a nearopt path — StraightPath, SplinePath, BSplinePath, or an object "
+            f"with s_end, dof and __call__(s, order) — got {type(path).__name__} {path!r:.60}"
+        )
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
     if margins is not None and margins.sigma.size == problem.sigma.size:
         problem = inherit_margins(problem, margins)
