@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 import pytest
 from checks import assert_independent_checks
@@ -332,3 +334,39 @@ def test_samples_too_coarse_for_a_phase_are_flagged() -> None:
                            max_iterations=0)
     assert limited.trajectory.faithful_rate() < 1000.0
     assert check_sampling(limited, 1000.0) is None
+
+
+@pytest.mark.parametrize(
+    "cost", [TimeCost(), CallableCost(lambda q, qd, u: 1.0 + 0.01 * np.sum(u**2, axis=1))],
+    ids=["SOCP", "NLP"],
+)
+def test_the_time_limit_stops_stage_1_at_its_first_unfinished_solve(
+    cost: nearopt.Cost, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """An unfinished conic solve is neither re-linearised (panda is damped) nor retried at looser
+    tolerances, and the NLP stops at its next iteration: the error names the caller's budget."""
+    from nearopt.timing import solvers
+
+    calls = []
+
+    def counted(*args: object, **kwargs: object) -> object:
+        calls.append(kwargs["time_limit"])
+        return real(*args, **kwargs)
+
+    real = solvers.solve_conic
+    monkeypatch.setattr(solvers, "solve_conic", counted)
+    panda = load("panda")
+    assert panda.damping.any()
+    if isinstance(cost, TimeCost):  # a budget shorter than one large solve
+        grid, budget = 4000, 0.05
+    else:  # a budget the convex start fits in but not the NLP after it
+        grid, budget = 200, None
+        start = time.perf_counter()
+        optimal_timing(panda, random_line(panda, 3), TimeCost(), grid=grid)
+        budget = 2.0 * (time.perf_counter() - start)
+    with pytest.raises(nearopt.SolverError, match=rf"time limit \({budget:.3g} s\) on a grid of "
+                       rf"{grid} segments") as info:
+        optimal_timing(panda, random_line(panda, 3), cost, grid=grid, time_limit=budget)
+    assert info.value.status == "MaxTime"
+    if isinstance(cost, TimeCost):
+        assert len(calls) == 1, calls

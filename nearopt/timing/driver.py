@@ -10,12 +10,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..cost import Cost, TimeCost, check_cost
-from ..errors import ConfigurationError
+from ..errors import ConfigurationError, SolverError
 from ..path import Path
 from ..trajectory import Trajectory
 from .between import BetweenSamples, inherit_margins, tighten, uniform_slow_down
 from .problem import build_timing_problem
-from .solvers import TimingMethod, TimingStatus, solve_timing
+from .solvers import TimingMethod, TimingSolution, TimingStatus, out_of_time, solve_timing
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -108,7 +108,9 @@ def optimal_timing(
         margins (where its motion bulged out between samples) this one starts from, so that it
         is seldom tightened and solved again.
     time_limit
-        Wall-time budget of the solver [s].
+        Wall-time budget of the whole call [s], checked between and inside its solves; a
+        solve cannot be stopped while Clarabel factorises, so a grid of 10⁵ segments may
+        overrun it by a few seconds.
 
     Returns
     -------
@@ -133,23 +135,12 @@ def optimal_timing(
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
     if margins is not None and margins.sigma.size == problem.sigma.size:
         problem = inherit_margins(problem, margins)
-    sol = solve_timing(problem, cost, tolerance=tolerance, guess=guess,  # gravity at the knots
-                       time_limit=deadline - time.perf_counter())
-    between = BetweenSamples(robot, path, problem)  # and between them
-    for _ in range(4):
-        # where the motion leaves a limit between samples: a uniform slow-down by α if that
-        # costs less than 1e-5 of b (below the grid's own error), otherwise tighten and re-solve
-        b = uniform_slow_down(between, sol.b)
-        if np.all(b >= (1.0 - 1e-5) * sol.b):
-            break
-        tighter = tighten(problem, between, sol.b)
-        if tighter is None:
-            break
-        problem = tighter
-        sol = solve_timing(problem, cost, tolerance=tolerance, guess=sol.b,
-                           time_limit=deadline - time.perf_counter())
-    else:
-        b = uniform_slow_down(between, sol.b)
+    try:
+        problem, sol, b = _solve_exactly(robot, path, problem, cost, tolerance, guess, deadline)
+    except SolverError as exc:
+        if exc.status == "MaxTime":  # say the caller's budget, not what was left of it
+            raise out_of_time(problem, time_limit) from None
+        raise
     # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
     traj = Trajectory(path, problem.sigma * path.s_end, b * path.s_end**2,
                       robot.inverse_dynamics_batch)
@@ -165,3 +156,40 @@ def optimal_timing(
         message=sol.message,
         wall_time=time.perf_counter() - t0,
     )
+
+
+def _solve_exactly(
+    robot: Robot,
+    path: Path,
+    problem: TimingProblem,
+    cost: Cost,
+    tolerance: float,
+    guess: NDArray[np.float64] | None,
+    deadline: float,
+) -> tuple[TimingProblem, TimingSolution, NDArray[np.float64]]:
+    """Solve on the grid, then keep the limits between samples (see :func:`optimal_timing`).
+
+    Returns the problem last solved (margins tightened), its solution and the b returned.
+    """
+    def left() -> float:
+        if time.perf_counter() >= deadline:
+            raise out_of_time(problem, 0.0)
+        return deadline - time.perf_counter()
+
+    sol = solve_timing(problem, cost, tolerance=tolerance, guess=guess,  # gravity at the knots
+                       time_limit=left())
+    between = BetweenSamples(robot, path, problem)  # and between them
+    for _ in range(4):
+        # where the motion leaves a limit between samples: a uniform slow-down by α if that
+        # costs less than 1e-5 of b (below the grid's own error), otherwise tighten and re-solve
+        b = uniform_slow_down(between, sol.b)
+        if np.all(b >= (1.0 - 1e-5) * sol.b):
+            break
+        tighter = tighten(problem, between, sol.b)
+        if tighter is None:
+            break
+        problem = tighter
+        sol = solve_timing(problem, cost, tolerance=tolerance, guess=sol.b, time_limit=left())
+    else:
+        b = uniform_slow_down(between, sol.b)
+    return problem, sol, b

@@ -105,7 +105,8 @@ def solve_timing(
     max_iterations
         Iteration limit of the NLP.
     time_limit
-        Wall-time limit of each conic solve [s].
+        Wall-time budget of the whole solve [s]: checked before and during every conic solve
+        and at every NLP iteration.
     guess
         A timing b near the answer, shape (N+1,), where the damping torque is first linearised
         (e.g. the last one of a path close to this one); without it, the first solve leaves
@@ -116,8 +117,10 @@ def solve_timing(
     InfeasiblePathError
         If gravity alone exceeds a torque limit somewhere on the path.
     SolverError
-        If Clarabel fails (it should not on a feasible problem).
+        If Clarabel fails (it should not on a feasible problem), or the time limit runs out
+        (``status`` is then ``"MaxTime"``).
     """
+    deadline = time.perf_counter() + time_limit
     check_gravity(problem)
     disc = Discretisation(problem)
     z_guess = None if guess is None or not disc.has_damping else np.asarray(guess)[1:-1]
@@ -125,9 +128,17 @@ def solve_timing(
         weights = cost.torque_weights(problem.dof)
         return _solve_convex(disc, cost, weights, tolerance, time_limit, z_guess)
     # any other f0: a local NLP from inside the time-optimal profile
-    fastest = _solve_convex(disc, TimeCost(), np.zeros(problem.dof), tolerance, time_limit,
-                            z_guess)
-    return _solve_nlp(disc, cost, fastest.b[1:-1], tolerance, max_iterations)
+    fastest = _solve_convex(disc, TimeCost(), np.zeros(problem.dof), tolerance,
+                            deadline - time.perf_counter(), z_guess)
+    return _solve_nlp(disc, cost, fastest.b[1:-1], tolerance, max_iterations, deadline)
+
+
+def out_of_time(problem: TimingProblem, time_limit: float) -> SolverError:
+    """The error of a stage-1 solve that ran out of its wall-time budget ``time_limit`` [s]."""
+    return SolverError(
+        f"stage 1 ran out of its time limit ({time_limit:.3g} s) on a grid of "
+        f"{problem.segments} segments", status="MaxTime"
+    )
 
 
 def _solve_convex(
@@ -148,6 +159,8 @@ def _solve_convex(
     deadline = time.perf_counter() + time_limit
 
     def socp(z_lin: NDArray[np.float64]) -> NDArray[np.float64]:
+        if time.perf_counter() >= deadline:  # building a large SOCP alone takes seconds
+            raise out_of_time(disc.problem, time_limit)
         rows, z_upper = disc.solver_rows(z_lin)
         const = disc.upper[torque_rows] - rows.upper[torque_rows]  # the torque's constant part
         torque = (rows.matrix[torque_rows], const)
@@ -156,7 +169,9 @@ def _solve_convex(
         for tol in (tolerance, 10.0 * tolerance, 100.0 * tolerance):
             sol = solve_conic(disc.ds, weights, rows, torque, z_upper, tolerance=tol,
                               time_limit=deadline - time.perf_counter())
-            if is_solved(sol.status) or str(sol.status) == "MaxTime":
+            if str(sol.status) == "MaxTime":  # no use re-linearising an unfinished answer
+                raise out_of_time(disc.problem, time_limit)
+            if is_solved(sol.status):
                 break
         solutions.append(sol)
         return sol.z
@@ -165,11 +180,6 @@ def _solve_convex(
     iterations = sum(sol.iterations for sol in solutions)
     status = solutions[-1].status
     if not is_solved(status):
-        if str(status) == "MaxTime":
-            raise SolverError(
-                f"stage 1 ran out of its time limit ({time_limit:.3g} s) on a grid of "
-                f"{disc.problem.segments} segments", status=status
-            )
         raise SolverError(f"Clarabel did not solve the stage-1 SOCP: {status}", status=status)
     z = into_limits(disc, z)
     return TimingSolution(
@@ -189,9 +199,17 @@ def _solve_nlp(
     z_max: NDArray[np.float64],
     tolerance: float,
     max_iterations: int,
+    deadline: float = np.inf,
 ) -> TimingSolution:
     """Any f0: SciPy's trust-constr interior-point method (a local optimum), from 0.7 times the
-    time-optimal profile ``z_max``."""
+    time-optimal profile ``z_max``, until the wall clock (``time.perf_counter``) reaches
+    ``deadline``."""
+    start = time.perf_counter()
+
+    def watch(*_: object) -> None:
+        if time.perf_counter() >= deadline:
+            raise out_of_time(disc.problem, deadline - start)
+
     # scale the cost to O(1) at the start and every two-sided row by its range
     x0 = 0.7 * z_max  # strictly inside: u(0.7 b) = g + 0.7 (u(b) − g)
     j_scale = 1.0 / disc.objective(x0, cost)[0]
@@ -237,6 +255,7 @@ def _solve_nlp(
             method="trust-constr",
             bounds=Bounds(lb, ub),
             constraints=[constraint],
+            callback=watch,
             options={
                 "gtol": tolerance,
                 "xtol": tolerance,
