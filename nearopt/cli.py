@@ -270,11 +270,11 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
         if args.csv:
             contents[outputs["--csv"]] = csv_text(result, args.rate)
     if args.html:
-        from .viewer import plan_html
+        from .viz.viewer import plan_html
 
         contents[outputs["--html"]] = plan_html(result)
     if plots is not None:
-        from .figures import render_figures
+        from .viz.figures import render_figures
 
         rendered = render_figures(result)
         plots.mkdir(exist_ok=True)
@@ -285,7 +285,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     for message in dict.fromkeys(str(w.message) for w in caught):  # after success only
         print(f"nearopt: warning: {message}", file=sys.stderr)
     if args.show:
-        from .viewer import show
+        from .viz.viewer import show
 
         signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C ends the show
         with show(result) as viewer:

@@ -20,9 +20,9 @@ from pathlib import Path
 import numpy as np
 
 import nearopt
-from nearopt.figures import save_figures
 from nearopt.paper_example import BEST_KNOWN_J, COST, TABLE_2, THETA_0, THETA_E
-from nearopt.viewer import export_html
+from nearopt.viz.figures import save_figures
+from nearopt.viz.viewer import export_html
 
 
 def table(result: nearopt.PlanResult, title: str, step: str, every: int) -> None:

@@ -24,8 +24,8 @@ from nearopt import (
     URDFError,
 )
 from nearopt.export import write_json
-from nearopt.figures import save_figures
 from nearopt.paper_example import THETA_0, THETA_E
+from nearopt.viz.figures import save_figures
 
 WEAK = '<limit effort="1" velocity="2" lower="-3" upper="3"/>'  # gravity needs ≈ 3.9 N·m at 1.5 rad
 PAPER = ["--q0", "45", "-90", "--qe", "-90", "0", "--deg"]

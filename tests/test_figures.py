@@ -10,8 +10,8 @@ import pytest
 from conftest import load
 
 import nearopt
-from nearopt.figures import plot_history, plot_torques, plot_workspace, save_figures
 from nearopt.paper_example import COST, TABLE_2, THETA_0, THETA_E
+from nearopt.viz.figures import plot_history, plot_torques, plot_workspace, save_figures
 
 matplotlib.use("Agg")
 

@@ -12,7 +12,7 @@ from conftest import load
 
 import nearopt
 from nearopt.paper_example import COST, THETA_0, THETA_E
-from nearopt.viewer import export_html, show
+from nearopt.viz.viewer import export_html, show
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -125,7 +125,7 @@ def test_live_server_stops_when_its_parent_dies(tmp_path: Path) -> None:
     script = tmp_path / "parent.py"
     script.write_text(
         "import numpy as np, nearopt, sys, time\n"
-        "from nearopt.viewer import show\n"
+        "from nearopt.viz.viewer import show\n"
         "r = nearopt.Robot.from_name('two_link')\n"
         "res = nearopt.plan(r, [0.5, 0.2], [1.0, 1.0], grid=20, max_iterations=1)\n"
         "viewer = show(res)\n"

@@ -35,16 +35,16 @@ from meshcat.animation import Animation
 from meshcat.servers.tree import SceneTree, find_node, walk
 from pinocchio.visualize import MeshcatVisualizer
 
-from .errors import ConfigurationError, NearoptError
-from .figures import plane_axes, tip_path
-from .outputs import write_atomically
+from ..errors import ConfigurationError, NearoptError
+from ..outputs import write_atomically
+from .geometry import plane_axes, tip_path
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from .planning import PlanResult
-    from .robot import Robot
-    from .trajectory import Trajectory
+    from ..planning import PlanResult
+    from ..robot import Robot
+    from ..trajectory import Trajectory
 
 __all__ = ["export_html", "show", "LiveViewer", "scene_html", "plan_html"]
 
@@ -229,7 +229,7 @@ class LiveViewer:
     def __init__(self, timeout: float = 30.0) -> None:
         # -P: do not put the working folder first on the child's path (it must import this nearopt)
         self._process = subprocess.Popen(
-            [sys.executable, "-P", "-u", "-m", "nearopt._meshcat_server"],
+            [sys.executable, "-P", "-u", "-m", "nearopt.viz._meshcat_server"],
             stdin=subprocess.PIPE,
             stdout=subprocess.PIPE,
             stderr=subprocess.DEVNULL,

@@ -18,16 +18,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .errors import ConfigurationError
-from .outputs import write_atomically
+from ..errors import ConfigurationError
+from ..outputs import write_atomically
+from .geometry import chain_points, plane_axes, tip_path
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
     from numpy.typing import NDArray
 
-    from .planning import PlanResult
-    from .robot import Robot
-    from .trajectory import Trajectory
+    from ..planning import PlanResult
+    from ..robot import Robot
+    from ..trajectory import Trajectory
 
 __all__ = [
     "plot_torques",
@@ -35,8 +36,6 @@ __all__ = [
     "plot_history",
     "render_figures",
     "save_figures",
-    "plane_axes",
-    "tip_path",
 ]
 
 
@@ -75,29 +74,6 @@ def plot_torques(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> 
     return fig
 
 
-def _chain(robot: Robot, q: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Positions of the moving joints' frames and of the tip (the links' centre lines)."""
-    placements = robot.link_placements(q)
-    points = [m[:3, 3] for m in placements.values()]
-    return np.array([*points, robot.frame_position(q)])
-
-
-def plane_axes(points: NDArray[np.float64]) -> NDArray[np.float64] | None:
-    """Screen axes (right, up) of the points' plane seen from its −y side, or None if not planar.
-
-    "Up" is world z projected into the plane (when the plane is not horizontal), as in the
-    paper's Fig. 2 of the vertical two-link arm.
-    """
-    centred = points - points.mean(axis=0)
-    _, sv, vt = np.linalg.svd(centred, full_matrices=False)
-    if sv[-1] >= 1e-6 * max(sv[0], 1e-12):
-        return None
-    normal = vt[2] if vt[2] @ [0.0, -1.0, 0.0] >= 0 else -vt[2]  # towards the viewer
-    up = np.array([0.0, 0.0, 1.0]) - normal[2] * normal
-    up = up / np.linalg.norm(up) if np.linalg.norm(up) > 0.1 else vt[1]
-    return np.array([np.cross(up, normal), up])
-
-
 def plot_workspace(
     robot: Robot, motions: dict[str, Trajectory], poses: int = 6
 ) -> Figure:
@@ -115,7 +91,7 @@ def plot_workspace(
     plt = _pyplot()
     tips = {label: tip_path(robot, traj) for label, traj in motions.items()}
     frames = {
-        label: [_chain(robot, q) for q in traj(np.linspace(0, traj.duration, poses), 0)]
+        label: [chain_points(robot, q) for q in traj(np.linspace(0, traj.duration, poses), 0)]
         for label, traj in motions.items()
     }
     everything = np.vstack([*tips.values(), *(c for f in frames.values() for c in f)])
@@ -147,10 +123,6 @@ def plot_workspace(
     fig.suptitle(f"{robot.name}: workspace path and link poses")
     fig.tight_layout()
     return fig
-
-
-def tip_path(robot: Robot, trajectory: Trajectory, points: int = 300) -> NDArray[np.float64]:
-    return robot.frame_position(trajectory(np.linspace(0, trajectory.duration, points), 0))
 
 
 def plot_history(result: PlanResult, reference: dict[int, float] | None = None) -> Figure:
