@@ -7,12 +7,13 @@ import socket
 from pathlib import Path
 
 import numpy as np
+import pinocchio as pin
 import pytest
-from conftest import load
+from conftest import ROBOT_NAMES, load
 
 import nearopt
 from nearopt.paper_example import COST, THETA_0, THETA_E
-from nearopt.viz.viewer import export_html, show
+from nearopt.viz.viewer import export_html, mesh_parts, show
 
 CHROMIUM = Path("/usr/bin/chromium")
 ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
@@ -40,48 +41,110 @@ def _pixels(path: Path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGB"), dtype=float)
 
 
+WIDTH, HEIGHT = 640, 480
+# world placement of the node at `path` relative to the scene's root node /meshcat (row-major)
+PLACEMENT = """(path) => {
+  const root = viewer.scene_tree.find(['meshcat']).object;
+  const node = viewer.scene_tree.find(path).object;
+  root.updateMatrixWorld(true);
+  const m = root.matrixWorld.clone().invert().multiply(node.matrixWorld);
+  return m.transpose().toArray();
+}"""
+# pixel (column, row) of the robot's base (the origin of /meshcat) in the view
+BASE_PIXEL = f"""() => {{
+  const root = viewer.scene_tree.find(['meshcat']).object;
+  root.updateMatrixWorld(true);
+  const v = root.localToWorld(viewer.camera.position.clone().set(0, 0, 0)).project(viewer.camera);
+  return [(v.x + 1) / 2 * {WIDTH}, (1 - v.y) / 2 * {HEIGHT}];
+}}"""
+
+
+def _visible(page: object, node: list[str], visible: bool) -> None:
+    page.evaluate(f"viewer.scene_tree.find({node!r}).object.visible = {str(visible).lower()};"
+                  "viewer.set_dirty();")
+
+
+def _open(page: object, url: str, geometries: int) -> None:
+    """Load a page and wait until every visual's mesh is in the scene (decoded asynchronously)."""
+    page.goto(url)
+    page.wait_for_function(f"() => ({COUNT_MESHES})() >= {geometries}", timeout=60_000)
+    page.wait_for_timeout(500)
+
+
 @pytest.mark.parametrize("name", ["two_link", "panda"])
-def test_exported_html_plays_in_a_real_browser_offline(
+def test_exported_page_frames_the_motion_on_the_floor_offline(
     name: str, plans: dict[str, nearopt.PlanResult], tmp_path: Path
 ) -> None:
+    """The offline page in a real browser: it opens paused in the start pose, the robot stands
+    on the ground grid, the motion fills the view, the page plays its motion, nothing is fetched
+    from the network, and panda's page is under 8 MB."""
     playwright = pytest.importorskip("playwright.sync_api")
     assert CHROMIUM.exists(), "make test installs Debian's chromium (apt)"
     result = plans[name]
+    robot = result.robot
     html = export_html(result, tmp_path / f"{name}.html")
-    geometries = len(result.robot.visual_model().geometryObjects)
+    assert html.stat().st_size < 8e6, html.stat().st_size
+    visual = robot.visual_model()
     requests: list[str] = []
-    shots = {}
+    shot = {}
     with playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
-        page = browser.new_page(viewport={"width": 640, "height": 480})
+        page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
         page.on("request", lambda request: requests.append(request.url))
-        page.goto(html.resolve().as_uri())
-        # every visual's mesh is in the scene (meshes are decoded asynchronously)
-        page.wait_for_function(f"() => ({COUNT_MESHES})() >= {geometries}", timeout=60_000)
+        _open(page, html.resolve().as_uri(), len(visual.geometryObjects))
+        assert page.evaluate("viewer.animator.playing") is False
         assert page.evaluate("viewer.animator.duration") == pytest.approx(
             result.duration, abs=1.5 / 60
         )
-        page.evaluate("viewer.animator.pause()")
-        for label, t in (("early", 0.1 * result.duration), ("late", 0.8 * result.duration)):
-            page.evaluate(f"viewer.animator.seek({t}); viewer.set_dirty();")
+        # the first frame is the start pose: every visual where Pinocchio places it at θ0
+        data, gdata = robot.model.createData(), pin.GeometryData(visual)
+        pin.forwardKinematics(robot.model, data, np.asarray(result.trajectory(np.zeros(1), 0))[0])
+        pin.updateGeometryPlacements(robot.model, data, visual, gdata)
+        for g, placement in zip(visual.geometryObjects, gdata.oMg, strict=True):
+            shown = page.evaluate(PLACEMENT, ["meshcat", robot.name, "visuals", g.name])
+            np.testing.assert_allclose(np.reshape(shown, (4, 4)), placement.homogeneous,
+                                       atol=1e-6, err_msg=g.name)
+        base = page.evaluate(BASE_PIXEL)
+
+        def screenshot(label: str) -> np.ndarray:
             page.wait_for_timeout(300)
-            shots[label] = tmp_path / f"{label}.png"
-            page.screenshot(path=shots[label])
-        # the same view without the arm: what is left is background, grid and trails
-        page.evaluate(
-            f"viewer.scene_tree.find(['meshcat', '{result.robot.name}']).object.visible = false;"
-            "viewer.set_dirty();"
-        )
-        page.wait_for_timeout(300)
-        shots["empty"] = tmp_path / "empty.png"
-        page.screenshot(path=shots["empty"])
+            page.screenshot(path=tmp_path / f"{label}.png")
+            return _pixels(tmp_path / f"{label}.png")
+
+        shot["start"] = screenshot("start")
+        page.evaluate("viewer.animator.seek(0); viewer.set_dirty();")
+        shot["seek0"] = screenshot("seek0")
+        _visible(page, ["meshcat", "floor"], False)
+        _visible(page, ["meshcat", "trails"], False)
+        robots = []
+        for t in (0.0, 0.5 * result.duration, result.duration):
+            page.evaluate(f"viewer.animator.seek({t}); viewer.set_dirty();")
+            robots.append(screenshot(f"robot{t}"))
+        _visible(page, ["meshcat", robot.name], False)
+        shot["nothing"] = screenshot("nothing")
+        _visible(page, ["meshcat", "floor"], True)
+        shot["floor"] = screenshot("floor")
         browser.close()
-    early, late, empty = (_pixels(shots[k]) for k in ("early", "late", "empty"))
-    drawn = np.any(np.abs(early - empty) > 30, axis=2)
-    assert drawn.mean() > 0.002, "the arm covers part of the view"
-    moved = np.any(np.abs(early - late) > 30, axis=2)
-    assert moved.mean() > 0.001, "the arm is somewhere else at the two times"
     assert requests == [html.resolve().as_uri()], requests
+    np.testing.assert_allclose(shot["start"], shot["seek0"], atol=2.0)  # opens at t = 0
+
+    def mask(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        return np.any(np.abs(a - b) > 25, axis=2)
+
+    arm = [mask(r, shot["nothing"]) for r in robots]
+    floor = mask(shot["floor"], shot["nothing"])
+    assert mask(robots[0], robots[-1]).mean() > 0.001, "the arm moves"
+    # the motion fills the view: its bounding box spans ≥ 40 % of the smaller side
+    rows, cols = np.nonzero(np.logical_or.reduce(arm))
+    span = max(rows.max() - rows.min(), cols.max() - cols.min())
+    assert span >= 0.4 * min(WIDTH, HEIGHT), span
+    # the ground grid is drawn at the base or just below it (under an arm that reaches below its
+    # base), not above it; the robot does not reach below it there
+    x, y = int(round(base[0])), int(round(base[1]))
+    assert floor[max(y - 5, 0) : y + 40, max(x - 40, 0) : x + 40].any(), (x, y)
+    assert np.nonzero(floor.any(axis=1))[0].max() > y + 40, "seen from above: its near edge"
+    lowest = np.nonzero(arm[0].any(axis=1))[0].max()
+    assert lowest <= y + 0.06 * HEIGHT, (lowest, y)
 
 
 def _listening(port: int) -> list[str]:
@@ -145,3 +208,44 @@ def test_live_server_stops_when_its_parent_dies(tmp_path: Path) -> None:
             break
         time.sleep(0.1)
     assert _listening(port) == []
+
+
+def test_live_and_offline_pages_look_the_same(
+    plans: dict[str, nearopt.PlanResult], tmp_path: Path
+) -> None:
+    """show() and export_html() send the same scene: the same picture on load."""
+    playwright = pytest.importorskip("playwright.sync_api")
+    result = plans["panda"]
+    geometries = len(result.robot.visual_model().geometryObjects)
+    html = export_html(result, tmp_path / "panda.html")
+    pictures = []
+    with show(result) as viewer, playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+        for url in (html.resolve().as_uri(), viewer.url):
+            page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
+            _open(page, url, geometries)
+            page.screenshot(path=tmp_path / "shot.png")
+            pictures.append(_pixels(tmp_path / "shot.png"))
+        browser.close()
+    differ = np.any(np.abs(pictures[0] - pictures[1]) > 25, axis=2)
+    assert differ.mean() < 0.005, differ.mean()
+
+
+@pytest.mark.parametrize("name", [n for n in ROBOT_NAMES if n != "two_link"])
+def test_converted_meshes_are_the_ones_pinocchio_loaded(name: str) -> None:
+    """Every mesh the page carries has the vertices' extent and triangle count of the mesh
+    Pinocchio (assimp, through coal) loaded from the same file and scale."""
+    for g in load(name).visual_model().geometryObjects:
+        if not g.meshPath:
+            continue
+        parts = mesh_parts(g.meshPath, tuple(float(x) for x in g.meshScale))
+        ours = np.vstack([vertices for vertices, _, _ in parts])
+        bvh = g.geometry
+        theirs = np.asarray(bvh.vertices())
+        np.testing.assert_allclose(ours.min(axis=0), theirs.min(axis=0), atol=1e-6)
+        np.testing.assert_allclose(ours.max(axis=0), theirs.max(axis=0), atol=1e-6)
+        count = sum(len(faces) for _, faces, _ in parts)  # assimp drops a few degenerate ones
+        assert abs(count - bvh.num_tris) <= 1e-3 * bvh.num_tris, (g.name, count, bvh.num_tris)
+        for vertices, faces, rgba in parts:
+            assert faces.min() >= 0 and faces.max() < len(vertices)
+            assert np.all((rgba >= 0) & (rgba <= 1)) and rgba.shape == (4,)

@@ -1,10 +1,13 @@
 """Watch a plan in the browser: a meshcat animation, live (127.0.0.1 only) or as a standalone file.
 
-The arm is drawn from its URDF visuals (meshes of example-robot-data, primitives of the bundled
-arm) by Pinocchio's ``MeshcatVisualizer``, which has no animation support of its own: the frames of
-meshcat's Animation track (play / pause / scrub in the browser's "Animations" panel) are built here
-from the kinematics, one per 1/fps s of the motion, in real time. The tip's path is drawn as a
-trail, and the straight joint line the planner started from as a grey one.
+The arm is drawn from its URDF visuals (meshes of example-robot-data as binary triangle meshes
+with their materials' colours, primitives of the bundled arm), standing on a ground grid at its
+base's height, z up as in the URDF; the camera frames every link position of the motion (along
+the plane's normal for a planar arm, obliquely from above otherwise). The frames of meshcat's
+Animation track (play / pause / scrub in the browser's "Animations" panel; it opens paused at
+t = 0 in the start pose) are built from the kinematics, one per 1/fps s of the motion, in real
+time. The tip's path is drawn as a trail, and the straight joint line the planner started from
+as a grey one. The live and offline pages receive the same commands, so they look the same.
 
 Two ways to look at it:
 
@@ -19,12 +22,13 @@ from __future__ import annotations
 
 import atexit
 import base64
+import functools
 import queue
 import subprocess
 import sys
 import threading
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import meshcat
 import meshcat.geometry as mg
@@ -33,20 +37,23 @@ import pinocchio as pin
 import umsgpack
 from meshcat.animation import Animation
 from meshcat.servers.tree import SceneTree, find_node, walk
-from pinocchio.visualize import MeshcatVisualizer
+from pinocchio.visualize.meshcat_visualizer import loadPrimitive as load_primitive
 
 from ..errors import ConfigurationError, NearoptError
 from ..outputs import write_atomically
-from .geometry import plane_axes, tip_path
+from .geometry import chain_points, plane_axes, tip_path
 
 if TYPE_CHECKING:
-    from numpy.typing import NDArray
+    from numpy.typing import ArrayLike, NDArray
 
     from ..planning import PlanResult
     from ..robot import Robot
     from ..trajectory import Trajectory
 
-__all__ = ["export_html", "show", "LiveViewer", "scene_html", "plan_html"]
+__all__ = [
+    "export_html", "show", "LiveViewer", "scene_html", "plan_html", "scene_view", "SceneView",
+    "mesh_parts",
+]
 
 _VIEWER_JS = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
 
@@ -108,10 +115,77 @@ function run(b64) {{
   viewer.handle_command_bytearray(bytes);
 }}
 {commands}
+// the animation opens paused at t = 0 with its time slider live (meshcat starts its actions
+// only on "play")
+if (viewer.animator.actions.length) {{
+  viewer.animator.play(); viewer.animator.pause(); viewer.animator.seek(0);
+}}
 </script>
 </body>
 </html>
 """
+
+
+class SceneView(NamedTuple):
+    """Where the scene is looked at from, in the robot's base frame (z up, as in the URDF).
+
+    Attributes
+    ----------
+    centre
+        Centre of the box holding every link position of the motion [m], shape (3,); the scene
+        is shifted so that the camera orbits around it.
+    radius
+        Half the diagonal of that box [m] (at least 0.1).
+    eye
+        Camera position [m], shape (3,): along the normal of a planar arm's plane, from the
+        front, right and above (30° elevation) otherwise, far enough for the box to fill the view.
+    floor
+        Height of the ground grid [m]: the base's (0), or below the lowest link if the arm
+        reaches under its base.
+    planar
+        Whether every link moves in one plane.
+    """
+
+    centre: NDArray[np.float64]
+    radius: float
+    eye: NDArray[np.float64]
+    floor: float
+    planar: bool
+
+
+def scene_view(robot: Robot, q: NDArray[np.float64]) -> SceneView:
+    """The camera and floor for configurations ``q`` (shape (K, n)) of a motion."""
+    points = np.vstack([chain_points(robot, qk) for qk in q[:: max(1, len(q) // 40)]])
+    low, high = points.min(axis=0), points.max(axis=0)
+    centre = 0.5 * (low + high)
+    radius = max(0.5 * float(np.linalg.norm(high - low)), 0.1)
+    axes = plane_axes(points)
+    if axes is not None:  # planar: look along the normal (right × up), from the −y side
+        direction = np.cross(axes[0], axes[1])
+    else:
+        direction = np.array([np.cos(np.pi / 6) * np.cos(-np.pi / 5),
+                              np.cos(np.pi / 6) * np.sin(-np.pi / 5), np.sin(np.pi / 6)])
+    # the sphere of the box fills the smaller side of meshcat's 75° field of view, 15 % margin
+    distance = 1.15 * radius / np.sin(np.radians(75.0 / 2))
+    floor = min(0.0, float(low[2]) - 0.05 * radius)
+    return SceneView(centre, radius, centre + distance * direction, floor, axes is not None)
+
+
+def _floor_grid(vis: meshcat.Visualizer, view: SceneView) -> None:
+    """A square ground grid under the motion at the floor's height (lines every 0.1 m, or 0.5 m
+    for motions wider than 4 m), replacing meshcat's own."""
+    cell = 0.1 if view.radius < 2.0 else 0.5
+    half = cell * np.ceil(1.5 * view.radius / cell)
+    cx, cy = (np.round(view.centre[:2] / cell) * cell)
+    ticks = np.arange(-half, half + 0.5 * cell, cell)
+    ends = []
+    for t in ticks:
+        ends += [[cx + t, cy - half], [cx + t, cy + half], [cx - half, cy + t], [cx + half, cy + t]]
+    xy = np.array(ends)
+    points = np.column_stack([xy, np.full(len(xy), view.floor)]).T.astype(np.float32)
+    vis["floor"].set_object(
+        mg.LineSegments(mg.PointsGeometry(points), mg.LineBasicMaterial(color=0x6A6A6A))
+    )
 
 
 def _draw(
@@ -121,58 +195,134 @@ def _draw(
     initial: Trajectory | None,
     fps: float,
 ) -> None:
-    """Load the arm, its animation and the trails into a meshcat visualizer."""
+    """Load the arm, its animation (paused at t = 0), the trails, floor and camera into meshcat."""
     if not (np.isfinite(fps) and fps > 0):
         raise ConfigurationError(f"fps must be a positive number, got {fps}")
     visual = robot.visual_model()
-    viz = MeshcatVisualizer(robot.model, visual, visual)
-    viz.initViewer(viewer=vis)
-    viz.loadViewerModel(rootNodeName=robot.name)
+    paths = _load_visuals(vis, robot, visual)
     model, data = robot.model, robot.model.createData()
     gdata = pin.GeometryData(visual)
     frames = int(np.ceil(trajectory.duration * fps - 1e-9))
     q = trajectory(np.minimum(np.arange(frames + 1) / fps, trajectory.duration), 0)
-    paths = [viz.getViewerNodeName(g, pin.GeometryType.VISUAL) for g in visual.geometryObjects]
-    animation = Animation(default_framerate=fps)
-    for k, qk in enumerate(q):
+
+    def place(qk: NDArray[np.float64]) -> list[NDArray[np.float64]]:
         pin.forwardKinematics(model, data, qk)
         pin.updateGeometryPlacements(model, data, visual, gdata)
+        return [m.homogeneous for m in gdata.oMg]
+
+    animation = Animation(default_framerate=fps)
+    for k, qk in enumerate(q):
         frame = animation.at_frame(vis, k)
-        for path, placement in zip(paths, gdata.oMg, strict=True):
-            frame[path].set_transform(placement.homogeneous)
-    viz.display(q[0])
-    _aim_camera(vis, robot, q)
+        for path, placement in zip(paths, place(qk), strict=True):
+            frame[path].set_transform(placement)
+    for path, placement in zip(paths, place(q[0]), strict=True):  # the start pose until played
+        vis[path].set_transform(placement)
+    view = scene_view(robot, q)
+    _floor_grid(vis, view)
     _trail(vis, "planned", tip_path(robot, trajectory), 0xD62728)
     if initial is not None:
         _trail(vis, "initial", tip_path(robot, initial), 0x888888)
-    vis.set_animation(animation, play=True, repetitions=1)
-
-
-def _aim_camera(vis: meshcat.Visualizer, robot: Robot, q: NDArray[np.float64]) -> None:
-    """Point the camera at the arm's base from far enough to see every link during the motion:
-    along the plane's normal for a planar motion, from the front, right and above otherwise."""
-    points = np.vstack(
-        [
-            np.array([m[:3, 3] for m in robot.link_placements(qk).values()])
-            for qk in q[:: max(1, len(q) // 20)]
-        ]
-    )
-    reach = max(float(np.max(np.linalg.norm(points, axis=1))), 0.2)
-    axes = plane_axes(points)
-    if axes is not None:  # planar: look along the normal (right × up), from the −y side
-        direction = np.cross(axes[0], axes[1])
-    else:
-        direction = np.array([1.2, -1.0, 0.6]) / np.linalg.norm([1.2, -1.0, 0.6])
-    eye = 2.2 * reach * direction
+    # meshcat's camera orbits the world origin: shift the scene so that it orbits the motion
+    vis.set_transform(pin.SE3(np.eye(3), -view.centre).homogeneous)
+    eye = view.eye - view.centre
     # the camera lives in a frame rotated by +90° about x (three.js is y-up): p = (x, z, −y)
     vis["/Cameras/default/rotated/<object>"].set_property(
         "position", [float(eye[0]), float(eye[2]), float(-eye[1])]
     )
+    vis["/Grid"].set_property("visible", False)
+    vis["/Axes"].set_property("visible", False)
+    vis.set_animation(animation, play=False, repetitions=1)
+
+
+def _load_visuals(vis: meshcat.Visualizer, robot: Robot, visual: pin.GeometryModel) -> list[str]:
+    """Every visual of the URDF under /meshcat/<robot>/visuals/<name>; returns the node paths.
+
+    Mesh files (Collada, STL, OBJ) are read once with trimesh and sent as binary triangle
+    meshes, one per colour of the file's materials, each vertex once per position and normal
+    (normals computed by the browser): panda's page is 5.6 MB instead of 29 MB. Primitives go
+    through Pinocchio's loader.
+    """
+    paths = []
+    for g in visual.geometryObjects:
+        path = f"{robot.name}/visuals/{g.name}"
+        paths.append(path)
+        rgba = np.asarray(g.meshColor, dtype=float)
+        if g.meshPath and Path(g.meshPath).is_file():
+            for k, (vertices, faces, colour) in enumerate(
+                mesh_parts(g.meshPath, tuple(float(x) for x in g.meshScale))
+            ):
+                material = mg.MeshPhongMaterial(color=_colour_int(colour[:3]))
+                if colour[3] < 1.0:
+                    material.transparent, material.opacity = True, float(colour[3])
+                vis[path][f"part{k}"].set_object(mg.TriangularMeshGeometry(vertices, faces),
+                                                 material)
+        else:
+            obj = load_primitive(g)
+            if obj is None:
+                raise NearoptError(f"the visual {g.name!r} of {robot.name} cannot be drawn")
+            material = mg.MeshPhongMaterial(color=_colour_int(rgba[:3]))
+            if rgba[3] < 1.0:
+                material.transparent, material.opacity = True, float(rgba[3])
+            vis[path].set_object(obj, material)
+    return paths
 
 
 def _trail(vis: meshcat.Visualizer, name: str, points: NDArray[np.float64], color: int) -> None:
     geometry = mg.PointsGeometry(points.T.astype(np.float32))
     vis["trails"][name].set_object(mg.Line(geometry, mg.LineBasicMaterial(color=color)))
+
+
+def _colour_int(rgb: ArrayLike) -> int:
+    r, g, b = (int(round(255 * float(np.clip(c, 0.0, 1.0)))) for c in rgb)
+    return (r << 16) | (g << 8) | b
+
+
+@functools.lru_cache(maxsize=256)
+def mesh_parts(
+    path: str, scale: tuple[float, float, float] = (1.0, 1.0, 1.0)
+) -> tuple[tuple[NDArray[np.float32], NDArray[np.uint32], NDArray[np.float64]], ...]:
+    """A mesh file as triangle meshes, one per colour: (vertices [m] (V, 3), faces (F, 3),
+    RGBA in [0, 1]), in the file's frame scaled by ``scale`` (the URDF's ``<mesh scale>``).
+
+    Raises
+    ------
+    NearoptError
+        If the file cannot be read as a mesh.
+    """
+    import trimesh
+
+    try:
+        scene = trimesh.load(path, force="scene", process=False)
+    except Exception as exc:  # trimesh raises whatever its readers raise
+        raise NearoptError(f"cannot read the mesh {path}: {exc}") from None
+    by_colour: dict[tuple[int, ...], list[tuple[NDArray, NDArray]]] = {}
+    for node in scene.graph.nodes_geometry:
+        transform, name = scene.graph[node]
+        mesh = scene.geometry[name]
+        if not hasattr(mesh, "faces") or len(mesh.faces) == 0:
+            continue
+        vertices = (trimesh.transform_points(mesh.vertices, transform)
+                    * np.asarray(scale)).astype(np.float32)
+        # files repeat a vertex for every face around it: keep one per position and normal
+        # direction (to about 15°), so that the browser's normals keep the sharp edges
+        key = np.hstack([vertices, np.round(4.0 * mesh.vertex_normals).astype(np.float32)])
+        _, first, inverse = np.unique(key, axis=0, return_index=True, return_inverse=True)
+        vertices, faces = vertices[first], inverse.reshape(-1)[np.asarray(mesh.faces)]
+        visual = mesh.visual
+        colour = getattr(visual, "main_color", None)
+        if colour is None and getattr(visual, "material", None) is not None:
+            colour = visual.material.main_color
+        rgba = tuple(int(c) for c in (colour if colour is not None else (230, 230, 230, 255)))
+        by_colour.setdefault(rgba, []).append((vertices, faces))
+    parts = []
+    for key, meshes in by_colour.items():
+        offsets = np.cumsum([0] + [len(v) for v, _ in meshes[:-1]])
+        vertices = np.vstack([v for v, _ in meshes]).astype(np.float32)
+        faces = np.vstack([f + o for (_, f), o in zip(meshes, offsets, strict=True)])
+        parts.append((vertices, faces.astype(np.uint32), np.array(key, dtype=float) / 255.0))
+    if not parts:
+        raise NearoptError(f"the mesh {path} has no triangles")
+    return tuple(parts)
 
 
 def scene_html(
