@@ -105,7 +105,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="write the planned motion as JSON (- for the standard output)")
     p.add_argument("--csv", metavar="FILE", help="write the same samples as CSV (- likewise)")
     p.add_argument("--rate", type=float, default=1000.0, help="JSON/CSV sampling rate [Hz] (1000)")
-    p.add_argument("--plots", metavar="DIR", help="write torques.png, workspace.png, history.png")
+    p.add_argument("--plots", metavar="DIR",
+                   help="write torques.png, speeds.png, workspace.png, history.png")
     p.add_argument("--html", metavar="FILE", help="write the animation as a standalone HTML file")
     p.add_argument("--verify", action="store_true",
                    help="print the verification report (every plan is verified before output)")

@@ -66,7 +66,7 @@ def test_plots_and_html_are_written(tmp_path: Path) -> None:
                "--quiet", "--plots", str(tmp_path / "figures"), "--html", str(tmp_path / "a.html"))
     assert done.returncode == 0, done.stderr
     assert sorted(p.name for p in (tmp_path / "figures").iterdir()) == [
-        "history.png", "torques.png", "workspace.png"]
+        "history.png", "speeds.png", "torques.png", "workspace.png"]
     assert "MeshCat.Viewer" in (tmp_path / "a.html").read_text()
 
 

@@ -8,10 +8,18 @@ import matplotlib
 import numpy as np
 import pytest
 from conftest import load
+from urdfs import write_urdf
 
 import nearopt
 from nearopt.paper_example import COST, TABLE_2, THETA_0, THETA_E
-from nearopt.viz.figures import plot_history, plot_torques, plot_workspace, save_figures
+from nearopt.viz.figures import (
+    plot_accelerations,
+    plot_history,
+    plot_speeds,
+    plot_torques,
+    plot_workspace,
+    save_figures,
+)
 
 matplotlib.use("Agg")
 
@@ -33,6 +41,45 @@ def test_torque_plot_shows_the_trajectory_torques_and_the_limits(
         np.testing.assert_allclose(u, traj.torque(t)[:, i], atol=1e-9)
         levels = sorted(float(line.get_ydata()[0]) for line in limits)
         assert levels == [robot.limits.effort_lower[i], robot.limits.effort_upper[i]]
+        assert ax.get_ylabel() == f"{robot.joint_names[i]}\n[N·m]"
+    assert [t.get_text() for t in fig.legends[0].get_texts()] == ["u (plan)", "limit"]
+
+
+def test_speed_plot_shows_the_speeds_at_their_limits() -> None:
+    """ur5 timed optimally along a line: the speed limits bind, and the figure shows it."""
+    robot = load("ur5")
+    q0 = np.array([0.0, -1.2, 1.2, -1.5, -1.5, 0.0])
+    traj = nearopt.optimal_timing(robot, nearopt.StraightPath(q0, q0 + 1.0), grid=60).trajectory
+    fig = plot_speeds(robot, traj, rate=500.0)
+    peaks = []
+    for i, ax in enumerate(fig.axes):
+        curve, *limits = ax.get_lines()
+        t, qd = curve.get_xydata().T
+        np.testing.assert_allclose(qd, traj(t, 1)[:, i], atol=1e-9)
+        v = robot.limits.velocity[i]
+        assert sorted(float(line.get_ydata()[0]) for line in limits) == [-v, v]
+        assert ax.get_ylabel().endswith("[rad/s]")
+        peaks.append(np.max(np.abs(qd)) / v)
+    assert max(peaks) == pytest.approx(1.0, abs=1e-3)  # at the limit, not beyond
+
+
+def test_prismatic_joints_get_linear_units_and_acceleration_limits_their_figure(
+    tmp_path: Path,
+) -> None:
+    robot = nearopt.Robot.from_urdf(write_urdf(tmp_path, types=("prismatic", "revolute")))
+    robot = robot.with_limits(acceleration=[2.0, np.inf])
+    traj = nearopt.optimal_timing(robot, nearopt.StraightPath([0.0, 0.0], [0.2, 0.3]),
+                                  grid=40).trajectory
+    units = {"torque": plot_torques, "speed": plot_speeds, "acceleration": plot_accelerations}
+    expected = {"torque": ("[N]", "[N·m]"), "speed": ("[m/s]", "[rad/s]"),
+                "acceleration": ("[m/s²]", "[rad/s²]")}
+    for kind, plot in units.items():
+        fig = plot(robot, traj, rate=500.0)
+        assert tuple(ax.get_ylabel().split("\n")[1] for ax in fig.axes) == expected[kind]
+    fig = plot_accelerations(robot, traj, rate=500.0)
+    first, second = (ax.get_lines() for ax in fig.axes)
+    assert sorted(float(line.get_ydata()[0]) for line in first[1:]) == [-2.0, 2.0]
+    assert len(second) == 1  # no limit, no line
 
 
 def test_planar_workspace_plot_is_in_the_arm_plane_with_the_tip_path(
@@ -60,7 +107,16 @@ def test_spatial_arm_gets_a_3d_workspace_plot() -> None:
     traj = nearopt.optimal_timing(robot, nearopt.StraightPath(np.zeros(6), np.full(6, 0.5)),
                                   grid=40).trajectory
     fig = plot_workspace(robot, {"line": traj})
-    assert fig.axes[0].name == "3d"
+    ax = fig.axes[0]
+    assert ax.name == "3d"
+    spans = [np.diff(getattr(ax, f"get_{a}lim")())[0] for a in "xyz"]
+    np.testing.assert_allclose(spans, spans[0])  # equal scales
+    start, goal = (c.get_offsets() for c in ax.collections[-2:])
+    tip = robot.frame_position(np.array([np.zeros(6), np.full(6, 0.5)]))
+    assert [c.get_label() for c in ax.collections[-2:]] == ["start", "goal"]
+    np.testing.assert_allclose([start[0], goal[0]], tip[:, :2], atol=1e-9)  # x, y on screen
+    stamps = [t.get_text() for t in ax.texts]
+    assert stamps[0] == " 0.00 s" and stamps[-1] == f" {traj.duration:.2f} s"
 
 
 def test_history_plot_and_files(paper_plan: nearopt.PlanResult, tmp_path: Path) -> None:
@@ -68,6 +124,8 @@ def test_history_plot_and_files(paper_plan: nearopt.PlanResult, tmp_path: Path) 
     ours, paper = fig.axes[0].get_lines()
     np.testing.assert_allclose(ours.get_ydata(), [it.J for it in paper_plan.history])
     np.testing.assert_array_equal(paper.get_xydata(), [[row.index, row.J] for row in TABLE_2])
+    assert paper.get_label() == "paper, Table 2" and fig.axes[0].get_ylabel() == "$J^j$"
     written = save_figures(paper_plan, tmp_path / "figures")
-    assert [p.name for p in written] == ["torques.png", "workspace.png", "history.png"]
+    assert [p.name for p in written] == ["torques.png", "speeds.png", "workspace.png",
+                                         "history.png"]
     assert all(p.stat().st_size > 10_000 and p.read_bytes()[:4] == b"\x89PNG" for p in written)

@@ -117,7 +117,10 @@ class BetweenSamples:
         worst = -np.inf
         for quantity, excess in zip(self.problem.quantities, self.excess(b, alpha), strict=True):
             scale = np.maximum(np.abs(quantity.lower), np.abs(quantity.upper))
-            relative = np.where(np.isfinite(scale), excess / np.where(scale > 0, scale, 1.0), -1.0)
+            finite = np.isfinite(scale)  # a joint without this limit: never in excess
+            relative = np.full(np.shape(excess), -1.0)
+            np.divide(excess, np.where(scale > 0, scale, 1.0), out=relative,
+                      where=np.broadcast_to(finite, np.shape(excess)))
             worst = max(worst, float(np.max(relative)))
         return worst
 

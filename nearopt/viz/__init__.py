@@ -16,6 +16,8 @@ from typing import Any
 
 _WHERE = {
     "plot_torques": "figures",
+    "plot_speeds": "figures",
+    "plot_accelerations": "figures",
     "plot_workspace": "figures",
     "plot_history": "figures",
     "render_figures": "figures",

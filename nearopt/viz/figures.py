@@ -1,10 +1,11 @@
 """The paper's figures for a plan (matplotlib, imported only when a figure is drawn).
 
 * :func:`plot_torques` — u_i(t) against the actuator limits (Figs. 6-8);
+* :func:`plot_speeds`, :func:`plot_accelerations` — θ̇_i(t), θ̈_i(t) against their limits;
 * :func:`plot_workspace` — the tip's path and link poses of the initial and final paths in the
   workspace (Figs. 3-5): in the arm's plane for a planar arm, in 3-D otherwise;
 * :func:`plot_history` — J over the iterations (Table 2);
-* :func:`save_figures` — all three as PNG files.
+* :func:`save_figures` — all of them as PNG files.
 
 Every function returns the ``matplotlib.figure.Figure`` it drew; its artists carry the plotted data
 (tests read them back).
@@ -32,6 +33,9 @@ if TYPE_CHECKING:
 
 __all__ = [
     "plot_torques",
+    "plot_speeds",
+    "plot_accelerations",
+    "prismatic",
     "plot_workspace",
     "plot_history",
     "render_figures",
@@ -46,8 +50,55 @@ def _pyplot():  # noqa: ANN202 - the module, imported lazily
     return plt
 
 
+def prismatic(robot: Robot) -> NDArray[np.bool_]:
+    """Which joints are prismatic (their units are m, m/s, N instead of rad, rad/s, N·m), (n,)."""
+    kinds = [robot.model.joints[j].shortname() for j in range(1, robot.model.njoints)]
+    return np.array(["Prismatic" in k or k.startswith("JointModelP") for k in kinds][: robot.n])
+
+
+def _joint_panels(
+    robot: Robot,
+    t: NDArray[np.float64],
+    values: NDArray[np.float64],
+    limits: tuple[NDArray[np.float64], NDArray[np.float64]],
+    quantity: tuple[str, str, str],
+    title: str,
+) -> Figure:
+    """One panel per joint: values[:, i] against t and its limits (dashed), a shared legend.
+
+    ``quantity`` is (symbol, unit of a revolute joint, unit of a prismatic joint).
+    """
+    plt = _pyplot()
+    n = robot.n
+    linear = prismatic(robot)
+    fig, axes = plt.subplots(n, 1, sharex=True, figsize=(7.5, 1.5 * n + 1.2), squeeze=False)
+    symbol, rot_unit, lin_unit = quantity
+    for i, ax in enumerate(axes[:, 0]):
+        ax.plot(t, values[:, i], color="C0", linewidth=1.4, label=f"{symbol} (plan)")
+        for k, limit in enumerate((limits[0][i], limits[1][i])):
+            if np.isfinite(limit):
+                ax.axhline(limit, color="C3", linestyle="--", linewidth=1,
+                           label="limit" if k == 0 else "_nolegend_")
+        unit = lin_unit if linear[i] else rot_unit
+        ax.set_ylabel(f"{robot.joint_names[i]}\n[{unit}]", fontsize=9, rotation=0,
+                      ha="right", va="center")
+        ax.tick_params(labelsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1, 0].set_xlabel("t [s]")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    for ax in axes[1:, 0]:  # a limit line only some joints have
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if lab not in labels:
+                handles.append(h)
+                labels.append(lab)
+    fig.legend(handles, labels, loc="upper right", fontsize=9, ncol=2)
+    fig.suptitle(title, x=0.02, ha="left", fontsize=11)
+    fig.tight_layout(rect=(0, 0, 1, 0.97))
+    return fig
+
+
 def plot_torques(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> Figure:
-    """u_i(t) of a motion, one panel per joint, with its limits as dashed lines (Figs. 6-8).
+    """u_i(t) of a motion, one panel per joint, with its effort limits (Figs. 6-8).
 
     Parameters
     ----------
@@ -56,28 +107,58 @@ def plot_torques(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> 
     trajectory
         The motion.
     rate
+        Sampling rate of the curves [Hz]. The torque steps where the path's acceleration jumps
+        (stage 1's knots): it is piecewise smooth, as the time-optimal control is.
+    """
+    samples = trajectory.sample(rate)
+    lim = robot.limits
+    return _joint_panels(
+        robot, samples.t, samples.tau, (lim.effort_lower, lim.effort_upper),
+        ("u", "N·m", "N"),
+        f"{robot.name}: actuator torques and limits (te = {trajectory.duration:.4f} s)",
+    )
+
+
+def plot_speeds(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> Figure:
+    """θ̇_i(t) of a motion, one panel per joint, with the speed limits ±v_i (what binds on most
+    industrial arms).
+
+    Parameters
+    ----------
+    robot
+        The arm (its velocity limits are drawn).
+    trajectory
+        The motion.
+    rate
         Sampling rate of the curves [Hz].
     """
-    plt = _pyplot()
     samples = trajectory.sample(rate)
-    n = robot.n
-    fig, axes = plt.subplots(n, 1, sharex=True, figsize=(7, 1.8 * n + 0.6), squeeze=False)
-    for i, ax in enumerate(axes[:, 0]):
-        ax.plot(samples.t, samples.tau[:, i], color="C0", label=f"u{i + 1}")
-        for limit in (robot.limits.effort_lower[i], robot.limits.effort_upper[i]):
-            ax.axhline(limit, color="0.4", linestyle="--", linewidth=1)
-        ax.set_ylabel(f"u{i + 1} [N·m]\n{robot.joint_names[i]}", fontsize=8)
-        ax.grid(alpha=0.3)
-    axes[-1, 0].set_xlabel("t [s]")
-    fig.suptitle(f"{robot.name}: torques and limits (te = {trajectory.duration:.4f} s)")
-    fig.tight_layout()
-    return fig
+    v = robot.limits.velocity
+    return _joint_panels(
+        robot, samples.t, samples.qd, (-v, v), ("θ̇", "rad/s", "m/s"),
+        f"{robot.name}: joint speeds and limits (te = {trajectory.duration:.4f} s)",
+    )
+
+
+def plot_accelerations(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> Figure:
+    """θ̈_i(t) of a motion, one panel per joint, with the acceleration limits ±a_i where the
+    robot has any (:meth:`~nearopt.Robot.with_limits`)."""
+    samples = trajectory.sample(rate)
+    a = robot.limits.acceleration
+    return _joint_panels(
+        robot, samples.t, samples.qdd, (-a, a), ("θ̈", "rad/s²", "m/s²"),
+        f"{robot.name}: joint accelerations and limits (te = {trajectory.duration:.4f} s)",
+    )
 
 
 def plot_workspace(
-    robot: Robot, motions: dict[str, Trajectory], poses: int = 6
+    robot: Robot, motions: dict[str, Trajectory], poses: int = 5
 ) -> Figure:
     """The tip's path and ``poses`` link poses of each motion in the workspace (Figs. 3-5).
+
+    The poses are drawn from light (t = 0) to dark (t = te) with their times written at the tip;
+    start and goal are marked. A planar arm is drawn in its plane, any other in 3-D with equal
+    axis scales.
 
     Parameters
     ----------
@@ -90,42 +171,57 @@ def plot_workspace(
     """
     plt = _pyplot()
     tips = {label: tip_path(robot, traj) for label, traj in motions.items()}
+    times = {label: np.linspace(0, traj.duration, poses) for label, traj in motions.items()}
     frames = {
-        label: [chain_points(robot, q) for q in traj(np.linspace(0, traj.duration, poses), 0)]
+        label: [chain_points(robot, q) for q in traj(times[label], 0)]
         for label, traj in motions.items()
     }
     everything = np.vstack([*tips.values(), *(c for f in frames.values() for c in f)])
     plane = plane_axes(everything)
-    fig = plt.figure(figsize=(5 * len(motions), 5))
+    if plane is not None:
+        def flat(p: NDArray[np.float64]) -> NDArray[np.float64]:
+            return p @ plane.T
+    else:
+        def flat(p: NDArray[np.float64]) -> NDArray[np.float64]:
+            return p
+    low, high = everything.min(axis=0), everything.max(axis=0)
+    centre, half = 0.5 * (low + high), 0.55 * float(np.max(high - low))
+    fig = plt.figure(figsize=(5.2 * len(motions), 5.2))
+    shades = np.linspace(0.75, 0.1, poses)
     for k, label in enumerate(motions):
         if plane is not None:
             ax = fig.add_subplot(1, len(motions), k + 1)
-
-            def flat(p: NDArray[np.float64]) -> NDArray[np.float64]:
-                return p @ plane.T
-
-            for chain in frames[label]:
-                ax.plot(*flat(chain).T, "-o", color="0.3", linewidth=1.5, markersize=3)
-            ax.plot(*flat(tips[label]).T, color="C3", linewidth=2, label="tip path")
             ax.set_aspect("equal")
             ax.set_xlabel("in-plane horizontal [m]")
             ax.set_ylabel("up [m]")
         else:
             ax = fig.add_subplot(1, len(motions), k + 1, projection="3d")
-            for chain in frames[label]:
-                ax.plot(*chain.T, "-o", color="0.3", linewidth=1.5, markersize=3)
-            ax.plot(*tips[label].T, color="C3", linewidth=2, label="tip path")
+            for axis, c in zip("xyz", centre, strict=True):  # equal scales: a cube
+                getattr(ax, f"set_{axis}lim")(c - half, c + half)
+            ax.set_box_aspect((1, 1, 1))
             ax.set_xlabel("x [m]")
             ax.set_ylabel("y [m]")
             ax.set_zlabel("z [m]")
+        for chain, shade, t in zip(frames[label], shades, times[label], strict=True):
+            pts = flat(chain)
+            ax.plot(*pts.T, "-o", color=str(shade), linewidth=1.5, markersize=3)
+            ax.text(*pts[-1], f" {t:.2f} s", fontsize=7, color=str(shade))
+        ax.plot(*flat(tips[label]).T, color="C3", linewidth=2, label="tip path")
+        ends = flat(tips[label][[0, -1]])
+        ax.scatter(*ends[:1].T, s=50, color="C2", zorder=5, label="start")
+        ax.scatter(*ends[1:].T, s=50, color="k", marker="s", zorder=5, label="goal")
         ax.set_title(f"{label} (te = {motions[label].duration:.3f} s)")
         ax.legend(loc="best", fontsize=8)
-    fig.suptitle(f"{robot.name}: workspace path and link poses")
+    fig.suptitle(f"{robot.name}: tip path and link poses (light: early, dark: late)")
     fig.tight_layout()
     return fig
 
 
-def plot_history(result: PlanResult, reference: dict[int, float] | None = None) -> Figure:
+def plot_history(
+    result: PlanResult,
+    reference: dict[int, float] | None = None,
+    reference_label: str = "paper, Table 2",
+) -> Figure:
     """J^j over the iterations j (Table 2), optionally beside reference values.
 
     Parameters
@@ -133,7 +229,9 @@ def plot_history(result: PlanResult, reference: dict[int, float] | None = None) 
     result
         The plan.
     reference
-        Iteration → J of another method (e.g. the paper's Table 2), drawn as markers.
+        Iteration → J of another method (e.g. the paper's Table 2), drawn as squares.
+    reference_label
+        The legend's name for ``reference``.
     """
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 4))
@@ -141,12 +239,13 @@ def plot_history(result: PlanResult, reference: dict[int, float] | None = None) 
     label = f"nearopt ({result.method})"
     ax.plot(j, [it.J for it in result.history], "-o", markersize=3, label=label)
     if reference:
-        ax.plot(list(reference), list(reference.values()), "s", color="C1", label="reference")
-    ax.set_xlabel("iteration j")
-    ax.set_ylabel("J^j")
+        ax.plot(list(reference), list(reference.values()), "s", color="C1",
+                label=reference_label)
+    ax.set_xlabel("iteration $j$")
+    ax.set_ylabel("$J^j$")
     ax.grid(alpha=0.3)
     ax.legend()
-    ax.set_title(f"{result.robot.name}: J = {result.J:.6f} after {len(j) - 1} iterations")
+    ax.set_title(f"{result.robot.name}: $J$ = {result.J:.6f} after {len(j) - 1} iterations")
     fig.tight_layout()
     return fig
 
@@ -154,15 +253,20 @@ def plot_history(result: PlanResult, reference: dict[int, float] | None = None) 
 def render_figures(
     result: PlanResult, reference: dict[int, float] | None = None
 ) -> dict[str, bytes]:
-    """torques.png, workspace.png and history.png of a plan, as PNG bytes by file name."""
+    """torques.png, speeds.png (accelerations.png if the robot has acceleration limits),
+    workspace.png and history.png of a plan, as PNG bytes by file name."""
     plt = _pyplot()
+    robot, traj = result.robot, result.trajectory
     figures = {
-        "torques.png": plot_torques(result.robot, result.trajectory),
-        "workspace.png": plot_workspace(
-            result.robot, {"initial": result.initial.trajectory, "final": result.trajectory}
-        ),
-        "history.png": plot_history(result, reference),
+        "torques.png": plot_torques(robot, traj),
+        "speeds.png": plot_speeds(robot, traj),
     }
+    if np.any(np.isfinite(robot.limits.acceleration)):
+        figures["accelerations.png"] = plot_accelerations(robot, traj)
+    figures["workspace.png"] = plot_workspace(
+        robot, {"initial": result.initial.trajectory, "final": traj}
+    )
+    figures["history.png"] = plot_history(result, reference)
     rendered = {}
     for name, fig in figures.items():
         buffer = io.BytesIO()
@@ -175,7 +279,7 @@ def render_figures(
 def save_figures(
     result: PlanResult, folder: str | Path, reference: dict[int, float] | None = None
 ) -> list[Path]:
-    """Write torques.png, workspace.png and history.png for a plan into ``folder`` (made if it is
+    """Write the figures of :func:`render_figures` for a plan into ``folder`` (made if it is
     missing, with its parents).
 
     Raises
