@@ -201,3 +201,18 @@ def test_plan_rejects_bad_requests() -> None:
     narrow = robot.with_limits(position=([-1.0, -1.0], [1.0, 1.0]))
     with pytest.raises(nearopt.ConfigurationError, match="joint2"):
         nearopt.plan(narrow, [0.0, 0.0], [0.5, -1.5])
+
+
+def test_many_control_points_do_not_stall_on_a_coarse_iterate_grid() -> None:
+    """48 control points with the default 64-segment iterate grid: the iterates are timed on at
+    least 4 segments per control point, so the plan improves the line as 16 points do (it
+    returned the line, converged after 5 rejected steps, before)."""
+    robot = load("panda")
+    lo = np.maximum(robot.limits.position_lower, -np.pi)
+    hi = np.minimum(robot.limits.position_upper, np.pi)
+    q0, qe = lo + 0.3 * (hi - lo), lo + 0.7 * (hi - lo)
+    cost = nearopt.TorqueCost(weights=0.5 / robot.limits.effort_upper**2)
+    many = nearopt.plan(robot, q0, qe, cost, options=nearopt.SCPOptions(control_points=48))
+    few = nearopt.plan(robot, q0, qe, cost, options=nearopt.SCPOptions(control_points=16))
+    assert few.J < 0.95 * few.initial.J  # 11 % lower than the line
+    assert many.J <= 1.001 * few.J, (many.J, few.J)

@@ -84,7 +84,8 @@ def sequential_convex(
         The running cost (a :class:`~nearopt.TorqueCost`: the convex model needs
         f0 = 1 + Σ w u²).
     grid
-        Stage 1's grid for the returned path; the iterates use ``options.grid`` if coarser.
+        Stage 1's grid for the returned path; the iterates use ``options.grid`` (at least 4
+        segments per control point) if coarser.
     velocity_limits, position_limits
         Which limits hold (position limits bound the control points).
     options
@@ -107,7 +108,7 @@ def sequential_convex(
         breaks = 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, k_count)[1:-1]))
     start = BSplinePath.line(q0, qe, k_count, breaks)
     ends = start.control_points[[0, -1]]
-    iterate_grid = min(grid, options.grid)
+    iterate_grid = min(grid, max(options.grid, 4 * k_count))  # ≥ 4 segments per control point
     lim = robot.limits
     # a control point moved by δ changes θ' by about δ·(K − 1): the trust region is measured in
     # changes of θ' relative to each joint's scale (its motion, at least 10 % of its range and
