@@ -213,10 +213,11 @@ def _draw(
     animation = Animation(default_framerate=fps)
     for k, qk in enumerate(q):
         frame = animation.at_frame(vis, k)
-        for path, placement in zip(paths, place(qk), strict=True):
+        placements = place(qk)
+        for path, placement in zip(paths, placements, strict=True):
             frame[path].set_transform(placement)
-    for path, placement in zip(paths, place(q[0]), strict=True):  # the start pose until played
-        vis[path].set_transform(placement)
+            if k == 0:  # the start pose until played
+                vis[path].set_transform(placement)
     view = scene_view(robot, q)
     _floor_grid(vis, view)
     _trail(vis, "planned", tip_path(robot, trajectory), 0xD62728)
@@ -246,25 +247,26 @@ def _load_visuals(vis: meshcat.Visualizer, robot: Robot, visual: pin.GeometryMod
     for g in visual.geometryObjects:
         path = f"{robot.name}/visuals/{g.name}"
         paths.append(path)
-        rgba = np.asarray(g.meshColor, dtype=float)
         if g.meshPath and Path(g.meshPath).is_file():
             for k, (vertices, faces, colour) in enumerate(
                 mesh_parts(g.meshPath, tuple(float(x) for x in g.meshScale))
             ):
-                material = mg.MeshPhongMaterial(color=_colour_int(colour[:3]))
-                if colour[3] < 1.0:
-                    material.transparent, material.opacity = True, float(colour[3])
                 vis[path][f"part{k}"].set_object(mg.TriangularMeshGeometry(vertices, faces),
-                                                 material)
+                                                 _material(colour))
         else:
             obj = load_primitive(g)
             if obj is None:
                 raise NearoptError(f"the visual {g.name!r} of {robot.name} cannot be drawn")
-            material = mg.MeshPhongMaterial(color=_colour_int(rgba[:3]))
-            if rgba[3] < 1.0:
-                material.transparent, material.opacity = True, float(rgba[3])
-            vis[path].set_object(obj, material)
+            vis[path].set_object(obj, _material(g.meshColor))
     return paths
+
+
+def _material(rgba: ArrayLike) -> mg.MeshPhongMaterial:
+    """A Phong material of colour RGBA in [0, 1] (transparent if alpha < 1)."""
+    material = mg.MeshPhongMaterial(color=_colour_int(np.asarray(rgba)[:3]))
+    if float(rgba[3]) < 1.0:
+        material.transparent, material.opacity = True, float(rgba[3])
+    return material
 
 
 def _trail(vis: meshcat.Visualizer, name: str, points: NDArray[np.float64], color: int) -> None:
