@@ -7,13 +7,16 @@ The package follows the paper "Near-Optimum Trajectory Planning for Robot Manipu
 """
 
 from .catalog import available_robots
+from .collision import CollisionModel, Obstacle, Scene
 from .cost import CallableCost, Cost, TimeCost, TorqueCost
 from .errors import (
+    CollisionError,
     ConfigurationError,
     InfeasiblePathError,
     NearoptError,
     RobotNotFoundError,
     SamplingWarning,
+    SceneError,
     SolverError,
     URDFError,
 )
@@ -59,12 +62,17 @@ __all__ = [
     "JointLimits",
     "PathCoefficients",
     "available_robots",
+    "Scene",
+    "Obstacle",
+    "CollisionModel",
     "NearoptError",
     "URDFError",
     "RobotNotFoundError",
     "ConfigurationError",
     "InfeasiblePathError",
     "SolverError",
+    "CollisionError",
+    "SceneError",
     "SamplingWarning",
 ]
 

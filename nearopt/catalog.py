@@ -34,26 +34,33 @@ class RobotEntry:
         The frame whose path the figures and the viewer trace (the end effector).
     locked_joints
         Joints held fixed at their reference value (e.g. gripper fingers), so that the arm is left.
+    srdf
+        The SRDF shipped with the URDF (its ``<disable_collisions>`` pairs), if any.
     """
 
     name: str
     urdf: Path
     tip: str
     locked_joints: tuple[str, ...] = ()
+    srdf: Path | None = None
 
 
-# name -> (path below example-robot-data's robots/ folder, tip frame, joints to lock)
-_ERD_ARMS: dict[str, tuple[str, str, tuple[str, ...]]] = {
-    "ur5": ("ur_description/urdf/ur5_robot.urdf", "tool0", ()),
+# name -> (path below example-robot-data's robots/ folder, tip frame, joints to lock, SRDF)
+_ERD_ARMS: dict[str, tuple[str, str, tuple[str, ...], str | None]] = {
+    "ur5": ("ur_description/urdf/ur5_robot.urdf", "tool0", (), "ur_description/srdf/ur5.srdf"),
     "panda": (
         "panda_description/urdf/panda.urdf",
         "panda_hand_tcp",
         ("panda_finger_joint1", "panda_finger_joint2"),
+        "panda_description/srdf/panda.srdf",
     ),
-    "xarm7": ("xarm_description/urdf/xarm7.urdf", "link_eef", ()),
-    "z1": ("z1_description/urdf/z1.urdf", "gripperStator", ("jointGripper",)),
-    "kinova": ("kinova_description/robots/kinova.urdf", "j2s6s200_end_effector", ()),
-    "so101": ("so_arm_description/urdf/so101.urdf", "gripper_frame_link", ("gripper",)),
+    "xarm7": ("xarm_description/urdf/xarm7.urdf", "link_eef", (),
+              "xarm_description/srdf/xarm7.srdf"),
+    "z1": ("z1_description/urdf/z1.urdf", "gripperStator", ("jointGripper",),
+           "z1_description/srdf/z1.srdf"),
+    "kinova": ("kinova_description/robots/kinova.urdf", "j2s6s200_end_effector", (),
+               "kinova_description/srdf/kinova.srdf"),
+    "so101": ("so_arm_description/urdf/so101.urdf", "gripper_frame_link", ("gripper",), None),
 }
 
 # name -> tip frame of the arms in robots/
@@ -103,6 +110,7 @@ def robot_entry(name: str) -> RobotEntry:
     if name in _BUNDLED:
         return RobotEntry(name, _bundled_dir() / f"{name}.urdf", _BUNDLED[name])
     if name in _ERD_ARMS:
-        rel, tip, locked = _ERD_ARMS[name]
-        return RobotEntry(name, _erd_share() / _ERD / "robots" / rel, tip, locked)
+        rel, tip, locked, srdf = _ERD_ARMS[name]
+        root = _erd_share() / _ERD / "robots"
+        return RobotEntry(name, root / rel, tip, locked, None if srdf is None else root / srdf)
     raise RobotNotFoundError(name, available_robots())

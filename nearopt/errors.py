@@ -11,6 +11,8 @@ __all__ = [
     "NearoptError",
     "URDFError",
     "RobotNotFoundError",
+    "SceneError",
+    "CollisionError",
     "ConfigurationError",
     "InfeasiblePathError",
     "SolverError",
@@ -119,6 +121,53 @@ class SolverError(NearoptError):
     def __init__(self, message: str, *, status: object = None) -> None:
         super().__init__(message)
         self.status = status
+
+
+class SceneError(ConfigurationError):
+    """A scene of obstacles that cannot be used: a bad file, field or value.
+
+    Parameters
+    ----------
+    message
+        What is wrong, naming the file, the obstacle and the field.
+    obstacle
+        The obstacle concerned, if one is.
+    field
+        The field concerned, if one is.
+    """
+
+    def __init__(
+        self, message: str, *, obstacle: str | None = None, field: str | None = None
+    ) -> None:
+        super().__init__(message)
+        self.obstacle = obstacle
+        self.field = field
+
+
+class CollisionError(NearoptError):
+    """A configuration or motion that collides (or comes closer than the margin), or no
+    collision-free path found.
+
+    Parameters
+    ----------
+    message
+        Where and why, naming the pair of bodies and their signed distance [m].
+    pair
+        The two bodies (robot links or obstacles), if one pair is concerned.
+    distance
+        Their signed distance [m] (negative: the penetration depth).
+    """
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        pair: tuple[str, str] | None = None,
+        distance: float | None = None,
+    ) -> None:
+        super().__init__(message)
+        self.pair = pair
+        self.distance = distance
 
 
 class SamplingWarning(UserWarning):

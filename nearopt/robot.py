@@ -118,6 +118,9 @@ class Robot:
     lock
         The locked joints' names in ``urdf_xml`` and the configuration of the full model they are
         held at (internal: how :meth:`visual_model` reduces the visuals like the model).
+    srdf
+        The SRDF whose ``<disable_collisions>`` pairs are not checked for self-collision
+        (:class:`~nearopt.collision.CollisionModel`), if any.
     """
 
     def __init__(
@@ -132,6 +135,7 @@ class Robot:
         urdf_path: Path | None = None,
         locked_joints: tuple[str, ...] = (),
         lock: tuple[tuple[str, ...], NDArray[np.float64]] | None = None,
+        srdf: Path | None = None,
     ) -> None:
         if model.nq != model.nv:
             raise URDFError(f"robot {name!r}: nq = {model.nq} ≠ nv = {model.nv}")
@@ -145,6 +149,7 @@ class Robot:
         self.urdf_path = urdf_path
         self.locked_joints = tuple(locked_joints)
         self._lock = lock  # the locked joints' names in urdf_xml and the full model's q there
+        self.srdf = srdf
         self._tip_id = _frame_id(model, tip, name)
         self._has_damping = bool(np.any(self.damping != 0.0))
 
@@ -183,9 +188,12 @@ class Robot:
             body frame on the last joint.
         base
             The link the chain to ``tip`` starts from (default: the URDF's root link).
-        srdf, group
-            An SRDF file of the URDF and one of its groups: the arm is the group's joints (its
-            chains, joints and subgroups); every other moving joint is locked.
+        srdf
+            An SRDF file of the URDF: its ``<disable_collisions>`` pairs are not checked for
+            self-collision (default for a named robot: the one example-robot-data ships).
+        group
+            A group of ``srdf``: the arm is the group's joints (its chains, joints and
+            subgroups); every other moving joint is locked.
         lock_at
             Values [rad or m] at which locked joints are held, by joint name.
         name
@@ -203,10 +211,12 @@ class Robot:
             A ``lock_at`` joint that is not locked, or a value outside its limits.
         """
         path = Path(path).expanduser().resolve()
-        if (srdf is None) != (group is None):
-            raise ConfigurationError("give srdf and group together: the group is read from it")
-        arm = read_urdf(path, tuple(locked_joints), tip, base,
-                        None if srdf is None else Path(srdf).expanduser(), group)
+        if group is not None and srdf is None:
+            raise ConfigurationError("a group needs its SRDF (srdf=...): the group is read from it")
+        srdf = None if srdf is None else Path(srdf).expanduser().resolve()
+        if srdf is not None and not srdf.is_file():
+            raise URDFError(f"the SRDF {srdf} does not exist", path=str(srdf))
+        arm = read_urdf(path, tuple(locked_joints), tip, base, srdf if group else None, group)
         robot_name, xml, continuous, no_effort, locked = (
             arm.name, arm.xml, arm.continuous, arm.no_effort, arm.locked
         )
@@ -263,6 +273,7 @@ class Robot:
             urdf_path=path,
             locked_joints=locked,
             lock=(arm.locked_in_xml, q_ref),
+            srdf=srdf,
         )
         robot._check_inertia()
         overrides = (effort_limit, velocity_limit, position_limits, damping, acceleration_limit)
@@ -294,7 +305,8 @@ class Robot:
             For an unknown name; the message lists the known ones.
         """
         entry = catalog.robot_entry(name)
-        kwargs = {"tip": entry.tip, "locked_joints": entry.locked_joints, "name": entry.name}
+        kwargs = {"tip": entry.tip, "locked_joints": entry.locked_joints, "name": entry.name,
+                  "srdf": entry.srdf}
         kwargs.update(overrides)
         return cls.from_urdf(entry.urdf, **kwargs)  # type: ignore[arg-type]
 
@@ -377,6 +389,7 @@ class Robot:
             tip=self.tip,
             urdf_xml=self.urdf_xml,
             urdf_path=self.urdf_path,
+            srdf=self.srdf,
             locked_joints=self.locked_joints,
             lock=self._lock,
         )
@@ -609,8 +622,23 @@ class Robot:
         URDFError
             If the robot was not built from a URDF, or a mesh cannot be found.
         """
+        return self._geometry(pin.GeometryType.VISUAL)
+
+    def collision_geometry(self) -> pin.GeometryModel:
+        """The URDF's ``<collision>`` geometry (meshes as coal's triangle models), attached to
+        this model's joints like the visuals (locked joints' links on their parent's joint).
+
+        Raises
+        ------
+        URDFError
+            If the robot was not built from a URDF, or a mesh cannot be found.
+        """
+        return self._geometry(pin.GeometryType.COLLISION)
+
+    def _geometry(self, kind: pin.GeometryType) -> pin.GeometryModel:
+        what = "visuals" if kind == pin.GeometryType.VISUAL else "collision geometry"
         if self.urdf_xml is None or self.urdf_path is None:
-            raise URDFError(f"robot {self.name!r} was not built from a URDF; it has no visuals")
+            raise URDFError(f"robot {self.name!r} was not built from a URDF; it has no {what}")
         dirs = [str(self.urdf_path.parent)]
         try:
             dirs += [str(d) for d in catalog.package_dirs()]
@@ -618,11 +646,9 @@ class Robot:
             pass
         full = pin.buildModelFromXML(self.urdf_xml)
         try:
-            geom = pin.buildGeomFromUrdfString(
-                full, self.urdf_xml, pin.GeometryType.VISUAL, package_dirs=dirs
-            )
+            geom = pin.buildGeomFromUrdfString(full, self.urdf_xml, kind, package_dirs=dirs)
         except (RuntimeError, ValueError) as exc:
-            raise URDFError(f"cannot load the visuals of {self.urdf_path}: {exc}") from exc
+            raise URDFError(f"cannot load the {what} of {self.urdf_path}: {exc}") from exc
         if self._lock is not None and self._lock[0]:
             names, q_ref = self._lock
             _, geom = pin.buildReducedModel(full, geom, [full.getJointId(j) for j in names], q_ref)

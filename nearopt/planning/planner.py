@@ -24,9 +24,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ..collision import Clearance, CollisionModel, Scene
+from ..collision.sampling import collision_free_path
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import ConfigurationError, SolverError
-from ..path import StraightPath
+from ..path import Path, StraightPath
 from ..robot import Robot
 from ..timing import MAX_GRID, TimingResult, optimal_timing
 from .paper import paper_iterations
@@ -64,6 +66,9 @@ def plan(
     position_limits: bool = True,
     callback: Callable[[Iteration], None] | None = None,
     verbose: bool = False,
+    scene: Scene | CollisionModel | None = None,
+    margin: float | None = None,
+    self_collision: bool | None = None,
 ) -> PlanResult:
     """Plan a near-optimum motion from rest at θ0 to rest at θe (Sections 4-6).
 
@@ -92,6 +97,16 @@ def plan(
         Enforce the robot's joint speed / position limits.
     callback
         Called with every accepted :class:`Iteration`, the straight line first.
+    scene
+        Obstacles (a :class:`~nearopt.collision.Scene`, or a ready
+        :class:`~nearopt.collision.CollisionModel`): every link keeps ``margin`` from them and,
+        with ``self_collision``, from the other links, along the whole path (certified between
+        checks). If the straight line collides, OMPL's RRT-Connect gives the first path.
+    margin
+        The clearance [m] (default: the scene's, :data:`~nearopt.collision.DEFAULT_MARGIN`).
+    self_collision
+        Keep the robot's links apart (default: when a scene is given; ``True`` without a scene
+        checks self-collision only).
 
     Returns
     -------
@@ -107,6 +122,9 @@ def plan(
         On a bad argument (wrong length, NaN, outside the position limits, unknown method, …).
     InfeasiblePathError
         If the straight line itself cannot be timed (gravity exceeds a limit along it).
+    CollisionError
+        If the start or the goal is closer than the margin (naming the pair and the distance),
+        or no collision-free path was found within the time limit.
     """
     t_start = time.perf_counter()
     if not isinstance(robot, Robot):
@@ -138,12 +156,32 @@ def plan(
         raise ConfigurationError(
             "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
         )
-    line = StraightPath(q0, qe)
+    collisions = _collision_model(robot, scene, margin, self_collision)
+    line: Path = StraightPath(q0, qe)
+    start = None
+    if collisions is not None:
+        if method == Method.PAPER:
+            raise ConfigurationError(
+                "method 'paper' cannot keep clearances from obstacles; use method='scp'"
+            )
+        collisions.check_configuration(q0, "start configuration q0")
+        collisions.check_configuration(qe, "goal configuration qe")
+        if not collisions.path_clearance(line).certified:
+            breaks = None
+            k = options.control_points
+            if options.knots == "clustered":
+                breaks = 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, k)[1:-1]))
+            start = collision_free_path(
+                collisions, q0, qe, control_points=k, breaks=breaks,
+                time_limit=max(0.5 * (t_start + time_limit - time.perf_counter()), 1e-3),
+            )
+            line = start
     try:
         initial = optimal_timing(robot, line, cost, grid=grid, velocity_limits=velocity_limits,
                                  time_limit=t_start + time_limit - time.perf_counter())
     except SolverError as exc:
-        raise SolverError(f"no plan: timing the straight line failed: {exc}",
+        what = "the straight line" if start is None else "the collision-free start"
+        raise SolverError(f"no plan: timing {what} failed: {exc}",
                           status=exc.status) from exc
     history: list[Iteration] = []
     best: list[TimingResult] = [initial]  # the last accepted iterate's timing (the best)
@@ -168,7 +206,8 @@ def plan(
     else:
         try:
             if method == Method.SCP:
-                outcome = sequential_convex(robot, q0, qe, cost, **common)
+                outcome = sequential_convex(robot, q0, qe, cost, **common,
+                                            collisions=collisions, start=start)
             else:
                 outcome = paper_iterations(robot, initial, cost, **common)
             timing, reason = outcome.timing, outcome.reason
@@ -181,7 +220,8 @@ def plan(
             message = f"interrupted after {len(history) - 1} iterations: the best plan so far"
         if timing.J > initial.J:  # e.g. no better path: the line as a B-spline on another grid
             timing = initial
-            message += "; the straight line is returned: it costs less on the plan's grid"
+            message += (f"; {'the straight line' if start is None else 'the first path'} is "
+                        "returned: it costs less on the plan's grid")
     return PlanResult(
         robot=robot,
         timing=timing,
@@ -192,7 +232,48 @@ def plan(
         message=message,
         evaluations=evaluations,
         wall_time=time.perf_counter() - t_start,
+        collisions=collisions,
+        clearance=None if collisions is None else _certify(collisions, timing.trajectory.path),
     )
+
+
+def _collision_model(
+    robot: Robot, scene: Scene | CollisionModel | None, margin: float | None,
+    self_collision: bool | None,
+) -> CollisionModel | None:
+    """The collision model the plan keeps, or None when nothing is checked."""
+    if isinstance(scene, CollisionModel):
+        if scene.robot is not robot:
+            raise ConfigurationError("the collision model was built for another Robot object")
+        if margin is not None or self_collision is not None:
+            raise ConfigurationError(
+                "give margin and self_collision when building the CollisionModel, not to plan()"
+            )
+        return scene
+    if scene is not None and not isinstance(scene, Scene):
+        raise ConfigurationError(
+            f"scene must be a nearopt.collision.Scene (Scene.from_file(path)) or a "
+            f"CollisionModel, got {type(scene).__name__}"
+        )
+    if self_collision is None:
+        self_collision = scene is not None
+    if scene is None and not self_collision:
+        if margin is not None:
+            raise ConfigurationError("margin applies with a scene or self_collision=True")
+        return None
+    return CollisionModel(robot, scene, margin=margin, self_collision=bool(self_collision))
+
+
+def _certify(collisions: CollisionModel, path: Path) -> Clearance:
+    """The returned path's certified clearance; a plan that is not certified is an error."""
+    clear = collisions.path_clearance(path)
+    if not clear.certified:  # every iterate was certified: this is a defect, never a plan
+        raise SolverError(
+            f"the planned path is not certified collision-free: {clear.closest.pair} at "
+            f"{clear.closest.distance * 1e3:.2f} mm (margin {collisions.margin * 1e3:.1f} mm) "
+            f"at s = {clear.s:.4f}"
+        )
+    return clear
 
 
 def _check_method(

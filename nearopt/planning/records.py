@@ -11,6 +11,7 @@ from enum import StrEnum
 from typing import TYPE_CHECKING, Literal
 
 if TYPE_CHECKING:
+    from ..collision import Clearance, CollisionModel
     from ..cost import Cost
     from ..path import Path
     from ..robot import Robot
@@ -194,6 +195,10 @@ class PlanResult:
         Stage-1 solves spent.
     wall_time
         Seconds spent in total.
+    collisions
+        The bodies kept apart and the margin, when collisions were checked.
+    clearance
+        The certified clearance of the returned path (the closest pair, where), when checked.
     """
 
     robot: Robot
@@ -205,6 +210,8 @@ class PlanResult:
     message: str
     evaluations: int
     wall_time: float
+    collisions: CollisionModel | None = None
+    clearance: Clearance | None = None
 
     @property
     def trajectory(self) -> Trajectory:

@@ -34,7 +34,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -50,11 +50,12 @@ from .records import Iteration, MethodOutcome, SCPOptions, StopReason
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from ..collision import CollisionModel
     from ..cost import Cost
     from ..robot import Robot
     from ..timing import TimingResult
 
-__all__ = ["sequential_convex"]
+__all__ = ["sequential_convex", "collision_rows"]
 
 
 def sequential_convex(
@@ -71,6 +72,8 @@ def sequential_convex(
     deadline: float,
     t_start: float,
     accept: Callable[[Iteration, TimingResult], None],
+    collisions: CollisionModel | None = None,
+    start: BSplinePath | None = None,
 ) -> MethodOutcome:
     """Improve the path from the straight line by sequential convex programming.
 
@@ -98,15 +101,25 @@ def sequential_convex(
         When planning started (for the iterates' wall times) [s].
     accept
         Called with every accepted iterate and its timing, the straight line (iterate 0) first.
+    collisions
+        Pairs of bodies kept apart by the margin along the whole path (see
+        :func:`collision_rows`), or None.
+    start
+        The first path (default: the straight line with ``options.control_points`` interior
+        points); its control points and knots are those of every iterate.
     """
     weights = cost.torque_weights(robot.n) if isinstance(cost, TorqueCost) else None
     if weights is None:
         raise SolverError("sequential convex programming needs f0 = 1 + Σ w u² (a TorqueCost)")
     n, k_count = robot.n, options.control_points
     breaks = None
-    if options.knots == "clustered":  # where stage 1's grid is dense too: σ = ½(1 − cos πx)
+    if start is not None:
+        k_count = start.control_points.shape[0] - 2
+        breaks = start.knots[4:-4] if k_count > 2 else None
+    elif options.knots == "clustered":  # where stage 1's grid is dense too: σ = ½(1 − cos πx)
         breaks = 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, k_count)[1:-1]))
-    start = BSplinePath.line(q0, qe, k_count, breaks)
+    if start is None:
+        start = BSplinePath.line(q0, qe, k_count, breaks)
     ends = start.control_points[[0, -1]]
     iterate_grid = min(grid, max(options.grid, 4 * k_count))  # ≥ 4 segments per control point
     lim = robot.limits
@@ -147,6 +160,8 @@ def sequential_convex(
         if basis is None:  # the grid (knots, interior points) is the same for every iterate
             basis = path_basis(timing.trajectory.path, disc)
         model = _model(disc, z, row_path_jacobian(robot, disc, z, basis), radius * scale)
+        if collisions is not None:
+            model = _with_rows(model, *collision_rows(collisions, path_of(p), radius * scale[:n]))
         j0 = timing.objective
         step = _solve_model(disc, weights, model, p, radius * scale, lower, upper)
         if step is None:
@@ -158,11 +173,13 @@ def sequential_convex(
             message = (f"converged: the convex model finds no path that lowers J by more than "
                        f"{options.tolerance:g} relative")
             break
-        try:
-            trial = time_it(p + dp, timing, disc.b(z_model))
-            evaluations += 1
-        except (InfeasiblePathError, SolverError):
-            trial = None
+        trial = None
+        if collisions is None or collisions.path_clearance(path_of(p + dp)).certified:
+            try:
+                trial = time_it(p + dp, timing, disc.b(z_model))
+                evaluations += 1
+            except (InfeasiblePathError, SolverError):
+                trial = None
         gain = -np.inf if trial is None else j0 - trial.objective
         ratio = gain / (j0 - predicted)
         reach = float(np.max(np.abs(dp) / scale))  # the step's length, as a fraction of scale
@@ -194,6 +211,60 @@ def sequential_convex(
         timing = time_it(p, on=grid)
         evaluations += 1
     return MethodOutcome(timing, reason, message, evaluations)
+
+
+def collision_rows(
+    collisions: CollisionModel, path: BSplinePath, reach: NDArray[np.float64],
+    checks: int = 129,
+) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
+    """The clearances at ``checks`` uniform σ, linearised in the interior control points:
+
+        d_k(σ_m) + ∇d_k(θ(σ_m))ᵀ Σ_j B_j(σ_m) Δc_j ≥ min(m⁺, d_k(σ_m)),
+
+    m⁺ = margin + max(¼ margin, 1 mm) at the checked points, so that the certified check between
+    them (at the margin itself) has room; the current path (Δc = 0) always satisfies them. Only
+    pairs whose distance the step (|Δθ_i| ≤ ``reach_i``) could bring to m⁺ are kept.
+
+    Returns
+    -------
+    G, lower
+        ``G Δp ≥ lower``, G of shape (rows, K·n) over the interior control points (point-major).
+    """
+    inner = collisions.margin + max(0.25 * collisions.margin, 1e-3)
+    sigma = np.linspace(0.0, 1.0, checks)
+    q = path(sigma)
+    basis = path.basis(sigma)[:, 1:-1]  # (S, K)
+    dist = np.array([collisions.distances(x) for x in q])  # (S, P)
+    moved = 2.0 * collisions.motion_rates @ reach  # (P,): how far the step can move each pair
+    # rows where a pair could reach m⁺: at its local minima along σ, ± 3 checks (the minimum
+    # moves with the path), and wherever it is already within m⁺ + 1 cm
+    low = np.zeros(dist.shape, dtype=bool)
+    low[1:-1] = (dist[1:-1] <= dist[:-2]) & (dist[1:-1] <= dist[2:])
+    low[[0, -1]] = True
+    for shift in (1, 2, 3):
+        low[shift:] |= low[:-shift]
+        low[:-shift] |= low[shift:]
+    keep = (dist - inner <= moved) & (low | (dist < inner + 0.01))
+    keep[:, :] &= np.any(basis != 0.0, axis=1)[:, None]
+    blocks, lower = [], []
+    for m in np.flatnonzero(keep.any(axis=1)):
+        d, grad = collisions.distance_gradients(q[m], np.flatnonzero(keep[m]))
+        blocks.append(np.kron(basis[m][None, :], grad))  # row: Σ_j B_j(σ) ∇dᵀ Δc_j
+        lower.append(np.minimum(inner - d, 0.0))
+    if not blocks:
+        return sp.csr_matrix((0, basis.shape[1] * q.shape[1])), np.zeros(0)
+    return sp.csr_matrix(np.vstack(blocks)), np.concatenate(lower)
+
+
+def _with_rows(model: _Model, path_rows: sp.csr_matrix, lower: NDArray[np.float64]) -> _Model:
+    """The model with rows ``path_rows Δp ≥ lower`` that do not involve the timing."""
+    if lower.size == 0:
+        return model
+    z_cols = model.matrix.shape[1] - path_rows.shape[1]
+    rows = sp.hstack([sp.csr_matrix((lower.size, z_cols)), path_rows]).tocsr()
+    return replace(model, matrix=sp.vstack([model.matrix, rows]).tocsr(),
+                   lower=np.concatenate([model.lower, lower]),
+                   upper=np.concatenate([model.upper, np.full(lower.size, np.inf)]))
 
 
 def _range(lim: object) -> NDArray[np.float64]:

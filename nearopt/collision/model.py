@@ -1,0 +1,488 @@
+"""Signed distances between the robot's links and the obstacles of a scene, their gradients in
+θ, and a certified check of a whole path.
+
+The robot's bodies are the URDF's ``<collision>`` geometry (Pinocchio's ``GeometryModel``), each
+mesh taken as its convex hull so that coal's GJK/EPA gives a signed distance d (negative: the
+penetration depth) and its nearest points p1, p2 with the unit normal n from the first body to the
+second. The checked pairs are
+
+* every link with every obstacle, except bodies fixed to the base (they cannot move; the table
+  the base stands on touches it);
+* every two links, except those on the same joint or on adjacent joints (parent and child), the
+  SRDF's ``<disable_collisions>`` pairs, and, for a robot without an SRDF, the pairs already in
+  contact at the neutral configuration (MoveIt's setup assistant's "default" rule).
+
+The gradient of d (Pinocchio and coal give none) comes from the nearest points and the joint
+Jacobians: ∂d/∂θ = nᵀ (J₂(p2) − J₁(p1)), J_k(p) the Jacobian of the point p fixed to body k.
+
+**Between checked points** (:meth:`CollisionModel.path_clearance`): the distance of a pair can
+change no faster than the speed of its bodies' points relative to each other, and for a path θ(s)
+
+    |d(s) − d(s_a)| ≤ Σ_j |θ'_j|max · R_j · |s − s_a|,
+
+the sum over the joints between the two bodies in the kinematic tree, R_j a bound on the
+distance of the moving body's points from joint j's axis (chain lengths plus the body's
+bounding-sphere radius; 1 for a prismatic joint). An interval [s_a, s_b] is therefore certified
+at level m when d(s_a) + d(s_b) − 2m ≥ L (s_b − s_a) (Schwarzer, Saha and Latombe, "Exact
+collision checking of robot paths", 2002), and bisected until it is or a point closer than m is
+found. |θ'_j|max is exact per polynomial piece of the path (θ' is piecewise quadratic for
+nearopt's paths), so the certificate is a proof, not a sample.
+"""
+
+from __future__ import annotations
+
+import xml.etree.ElementTree as ET
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import coal
+import numpy as np
+import pinocchio as pin
+from scipy.spatial import ConvexHull, QhullError
+
+from ..errors import CollisionError, ConfigurationError, SceneError, URDFError
+from ..path import BSplinePath, SplinePath, StraightPath
+from .scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sphere
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, NDArray
+
+    from ..path import Path as JointPath
+    from ..robot import Robot
+
+__all__ = ["CollisionModel", "Contact", "Clearance", "Pair"]
+
+
+@dataclass(frozen=True)
+class Pair:
+    """A checked pair of bodies: robot links (by link name) or obstacles (by obstacle name)."""
+
+    first: str
+    second: str
+
+    def __str__(self) -> str:
+        return f"{self.first} ↔ {self.second}"
+
+
+@dataclass(frozen=True)
+class Contact:
+    """The closest pair at one configuration.
+
+    Attributes
+    ----------
+    pair
+        The two bodies.
+    distance
+        Their signed distance [m] (negative: penetration depth).
+    points
+        The nearest points on the first and on the second body, in the base frame [m],
+        shape (2, 3).
+    """
+
+    pair: Pair
+    distance: float
+    points: NDArray[np.float64]
+
+
+@dataclass(frozen=True)
+class Clearance:
+    """The result of checking a whole path.
+
+    Attributes
+    ----------
+    certified
+        True when every pair keeps a distance ≥ ``level`` at every s (proved between the checked
+        points by the bound of the module docstring).
+    level
+        The distance certified [m].
+    closest
+        The closest pair found at a checked point, and where.
+    s
+        The path parameter of ``closest``.
+    checks
+        Distance evaluations (configurations × pairs) the certificate took.
+    """
+
+    certified: bool
+    level: float
+    closest: Contact
+    s: float
+    checks: int
+
+
+class CollisionModel:
+    """The robot's collision bodies and a scene's obstacles, with the pairs that are checked.
+
+    Parameters
+    ----------
+    robot
+        The arm (its URDF's ``<collision>`` elements).
+    scene
+        The obstacles (default: none, self-collision only).
+    srdf
+        An SRDF whose ``<disable_collisions>`` pairs are not checked (default: the robot's,
+        :attr:`Robot.srdf`).
+    margin
+        The clearance kept [m] (default: the scene's, whose default is
+        :data:`~nearopt.collision.DEFAULT_MARGIN`).
+    self_collision
+        Check pairs of the robot's own links.
+
+    Raises
+    ------
+    URDFError
+        A collision mesh cannot be loaded, or a bad SRDF.
+    SceneError
+        An obstacle's mesh cannot be loaded.
+    """
+
+    def __init__(
+        self,
+        robot: Robot,
+        scene: Scene | None = None,
+        *,
+        srdf: str | Path | None = None,
+        margin: float | None = None,
+        self_collision: bool = True,
+    ) -> None:
+        self.robot = robot
+        self.scene = Scene() if scene is None else scene
+        if not isinstance(self.scene, Scene):
+            raise SceneError(f"scene must be a nearopt Scene, got {type(scene).__name__}")
+        margin = self.scene.margin if margin is None else margin
+        if not (isinstance(margin, int | float) and np.isfinite(margin) and margin >= 0.0):
+            raise ConfigurationError(f"margin must be a distance ≥ 0 [m], got {margin!r}")
+        self.margin = float(margin)
+        model = robot.model
+        geom = robot.collision_geometry() if robot.urdf_xml is not None else pin.GeometryModel()
+        self._robot_geoms = geom.ngeoms
+        for obj in geom.geometryObjects:
+            obj.geometry = _convex(obj.geometry, obj.name)
+        for ob in self.scene.obstacles:
+            shape = _coal_shape(ob.shape, ob.name)
+            placement = pin.SE3(ob.rotation(), np.asarray(ob.position, dtype=float))
+            geom.addGeometryObject(pin.GeometryObject(f"obstacle:{ob.name}", 0, 0, placement,
+                                                      shape))
+        self.geometry = geom
+        self._names = [self._body(i) for i in range(geom.ngeoms)]
+        self._joint = np.array([o.parentJoint for o in geom.geometryObjects], dtype=int)
+        srdf_path = robot.srdf if srdf is None else Path(srdf).expanduser().resolve()
+        disabled = _srdf_disabled(srdf_path) if srdf_path is not None else set()
+        pairs: list[tuple[int, int]] = []
+        for b in range(self._robot_geoms, geom.ngeoms):  # links with obstacles
+            pairs += [(a, b) for a in range(self._robot_geoms) if self._joint[a] != 0]
+        if self_collision:
+            parents = list(model.parents)
+            for a in range(self._robot_geoms):
+                for b in range(a + 1, self._robot_geoms):
+                    ja, jb = int(self._joint[a]), int(self._joint[b])
+                    if ja == jb or parents[ja] == jb or parents[jb] == ja:
+                        continue
+                    if frozenset((self._names[a], self._names[b])) in disabled:
+                        continue
+                    pairs.append((a, b))
+        for a, b in pairs:
+            geom.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+        self._data = model.createData()
+        self._gdata = pin.GeometryData(geom)
+        self._configure()
+        if srdf_path is None and self_collision and pairs:  # MoveIt's "default" rule
+            q = np.clip(np.zeros(model.nq), robot.limits.position_lower,
+                        robot.limits.position_upper)
+            d = self._all(q)
+            keep = [k for k, (a, b) in enumerate(pairs) if b >= self._robot_geoms or d[k] > 0.0]
+            if len(keep) < len(pairs):
+                geom.removeAllCollisionPairs()
+                pairs = [pairs[k] for k in keep]
+                for a, b in pairs:
+                    geom.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+                self._gdata = pin.GeometryData(geom)
+                for req in self._gdata.distanceRequests:
+                    req.enable_nearest_points = True
+        self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
+        self.pairs = tuple(Pair(self._names[a], self._names[b]) for a, b in self._pairs)
+        self.motion_rates = self._motion_rates()
+        """R_j of every pair: how fast its distance can change per unit of θ'_j [m/rad or
+        m/m], shape (len(pairs), n) (see the module docstring)."""
+
+    # ------------------------------------------------------------------ queries
+    def __repr__(self) -> str:
+        return (f"CollisionModel({self.robot.name!r}, {len(self.scene.obstacles)} obstacles, "
+                f"{len(self.pairs)} pairs, margin {self.margin:g} m)")
+
+    def distances(self, q: ArrayLike) -> NDArray[np.float64]:
+        """Signed distance of every checked pair at θ [m], shape (len(pairs),)."""
+        return self._all(self.robot.check_configuration(q))
+
+    def closest(self, q: ArrayLike) -> Contact:
+        """The closest checked pair at θ (``distance`` inf when nothing is checked)."""
+        d = self.distances(q)
+        if d.size == 0:
+            return Contact(Pair("", ""), np.inf, np.full((2, 3), np.nan))
+        k = int(np.argmin(d))
+        r = self._gdata.distanceResults[k]
+        return Contact(self.pairs[k], float(d[k]),
+                       np.array([r.getNearestPoint1(), r.getNearestPoint2()]))
+
+    def check_configuration(self, q: ArrayLike, what: str = "configuration") -> None:
+        """Raise a :class:`CollisionError` if a checked pair at θ is closer than the margin."""
+        c = self.closest(q)
+        if c.distance < self.margin:
+            state = (f"penetrates by {-c.distance * 1e3:.1f} mm" if c.distance < 0 else
+                     f"is {c.distance * 1e3:.1f} mm apart, closer than the margin "
+                     f"{self.margin * 1e3:.1f} mm")
+            raise CollisionError(f"the {what} collides: {c.pair} {state}",
+                                 pair=(c.pair.first, c.pair.second), distance=c.distance)
+
+    def distance_gradients(
+        self, q: ArrayLike, pairs: ArrayLike | None = None
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """Signed distances d [m] and their gradients ∂d/∂θ [m/rad or m/m] at θ.
+
+        Parameters
+        ----------
+        q
+            θ, shape (n,).
+        pairs
+            Indices into :attr:`pairs` (default: all).
+
+        Returns
+        -------
+        d, G
+            Shapes (m,) and (m, n).
+        """
+        q = self.robot.check_configuration(q)
+        d = self._all(q)
+        index = np.arange(d.size) if pairs is None else np.asarray(pairs, dtype=int)
+        model, data = self.robot.model, self._data
+        grads = np.zeros((index.size, model.nv))
+        if index.size == 0:
+            return d[index], grads
+        pin.computeJointJacobians(model, data, q)
+        results = [self._gdata.distanceResults[int(k)] for k in index]
+        normal = np.array([r.normal for r in results])  # (m, 3), from the first to the second
+        frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
+        for side, sign in ((0, -1.0), (1, 1.0)):
+            joints = self._joint[self._pairs[index, side]]
+            points = np.array([r.getNearestPoint1() if side == 0 else r.getNearestPoint2()
+                               for r in results])
+            for j in np.unique(joints[joints != 0]):
+                rows = np.flatnonzero(joints == j)
+                jac = pin.getJointJacobian(model, data, int(j), frame)  # [v; ω] at o_j
+                arm = points[rows] - data.oMi[int(j)].translation
+                # nᵀ(v + ω × r) = nᵀv + (r × n)ᵀω
+                grads[rows] += sign * (normal[rows] @ jac[:3]
+                                       + np.cross(arm, normal[rows]) @ jac[3:])
+        return d[index], grads
+
+    # ------------------------------------------------------------------ paths
+    def path_clearance(
+        self, path: JointPath, level: float | None = None, *, samples: int = 64,
+        max_checks: int = 2_000_000,
+    ) -> Clearance:
+        """Check a whole path: is every pair at least ``level`` apart at every s?
+
+        Parameters
+        ----------
+        path
+            A :class:`~nearopt.StraightPath`, :class:`~nearopt.BSplinePath` or
+            :class:`~nearopt.SplinePath` (θ' piecewise quadratic, so its bound is exact).
+        level
+            The distance to certify [m] (default: the margin).
+        samples
+            Uniform intervals checked first; each is bisected until certified.
+        max_checks
+            Budget of pair distance evaluations; past it the path is not certified.
+        """
+        level = self.margin if level is None else float(level)
+        s_end = path.s_end
+        s = np.linspace(0.0, s_end, samples + 1)
+        q = path(s)
+        dist = np.array([self._all(x) for x in q])  # (S, P)
+        k_min = np.unravel_index(int(np.argmin(dist)), dist.shape) if dist.size else (0, 0)
+        checks = dist.size
+        if dist.size == 0:
+            return Clearance(True, level, self.closest(q[0]), 0.0, 0)
+
+        def contact(i_s: int, k: int, d: float, at: NDArray[np.float64]) -> Contact:
+            self._all(at)
+            r = self._gdata.distanceResults[int(k)]
+            return Contact(self.pairs[k], d, np.array([r.getNearestPoint1(),
+                                                       r.getNearestPoint2()]))
+
+        worst = (float(dist[k_min]), float(s[k_min[0]]), int(k_min[1]))
+        if worst[0] < level:
+            return Clearance(False, level, contact(0, worst[2], worst[0], q[k_min[0]]), worst[1],
+                             checks)
+        slope = _slope_bound(path)
+        # intervals (a, b, d_a, d_b) per pair, vectorised over the first pass
+        rate = self.motion_rates  # (P, n): R_j of each pair's moving bodies
+        speeds = slope(s[:-1], s[1:])  # (S−1, n)
+        bound = speeds @ rate.T * np.diff(s)[:, None]  # (S−1, P)
+        open_ = np.argwhere(dist[:-1] + dist[1:] - 2.0 * level < bound)
+        stack = [(s[i], s[i + 1], dist[i, k], dist[i + 1, k], int(k)) for i, k in open_]
+        model, data, geom, gdata = self.robot.model, self._data, self.geometry, self._gdata
+        while stack:
+            a, b, da, db, k = stack.pop()
+            if checks > max_checks or b - a < 1e-9 * s_end:
+                return Clearance(False, level, contact(0, k, min(da, db), path([a])[0]), a,
+                                 checks)
+            m = 0.5 * (a + b)
+            qm = path([m])[0]
+            pin.forwardKinematics(model, data, qm)
+            pin.updateGeometryPlacements(model, data, geom, gdata)
+            dm = pin.computeDistance(geom, gdata, int(k)).min_distance
+            checks += 1
+            if dm < worst[0]:
+                worst = (dm, m, k)
+            if dm < level:
+                return Clearance(False, level, contact(0, k, dm, qm), m, checks)
+            for lo, hi, dl, dh in ((a, m, da, dm), (m, b, dm, db)):
+                v = slope(np.array([lo]), np.array([hi]))[0] @ rate[k] * (hi - lo)
+                if dl + dh - 2.0 * level < v:
+                    stack.append((lo, hi, dl, dh, k))
+        return Clearance(True, level, contact(0, worst[2], worst[0], path([worst[1]])[0]),
+                         worst[1], checks)
+
+    # ------------------------------------------------------------------ internals
+    def _configure(self) -> None:
+        for req in self._gdata.distanceRequests:  # distances to 1e-8 m: gradients to 1e-4 by FD
+            req.enable_nearest_points = True
+            req.gjk_tolerance = 1e-8
+            req.epa_tolerance = 1e-8
+
+    def _all(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        if not self.geometry.collisionPairs:
+            return np.zeros(0)
+        pin.computeDistances(self.robot.model, self._data, self.geometry, self._gdata, q)
+        return np.array([r.min_distance for r in self._gdata.distanceResults])
+
+    def _body(self, i: int) -> str:
+        obj = self.geometry.geometryObjects[i]
+        if i >= self._robot_geoms:
+            return obj.name.removeprefix("obstacle:")
+        return self.robot.model.frames[obj.parentFrame].name
+
+    def _motion_rates(self) -> NDArray[np.float64]:
+        """R_j per pair and joint: how fast the pair's distance can change per unit of θ'_j
+        [m/rad or m/m], shape (P, n) (see the module docstring)."""
+        model, robot = self.robot.model, self.robot
+        n = model.nv
+        support = [set(model.supports[j].tolist()) - {0} for j in range(model.njoints)]
+        radius = np.zeros(self.geometry.ngeoms)
+        for i, obj in enumerate(self.geometry.geometryObjects):
+            g = obj.geometry
+            if isinstance(g, coal.Halfspace):
+                continue
+            g.computeLocalAABB()
+            centre = obj.placement.act(np.asarray(g.aabb_center))
+            radius[i] = np.linalg.norm(centre) + g.aabb_radius
+        prismatic = np.array([model.joints[j].shortname().startswith("JointModelP")
+                              for j in range(1, model.njoints)])
+        travel = np.where(prismatic, np.maximum(np.abs(robot.limits.position_lower),
+                                                np.abs(robot.limits.position_upper)), 0.0)
+        travel = np.where(np.isfinite(travel), travel, 10.0)
+        offsets = np.array([0.0] + [np.linalg.norm(model.jointPlacements[j].translation)
+                                    + travel[j - 1] for j in range(1, model.njoints)])
+
+        def reach(j: int, body: int) -> float:
+            """Bound on the distance of the body's points from joint j's axis [m]."""
+            jb = int(self._joint[body])
+            chain = [i for i in sorted(support[jb]) if i > j]  # joints after j up to the body
+            return float(offsets[chain].sum() + radius[body])
+
+        rates = np.zeros((len(self._pairs), n))
+        for k, (a, b) in enumerate(self._pairs):
+            sa, sb = support[self._joint[a]], support[self._joint[b]]
+            for j in sa ^ sb:
+                body = a if j in sa else b
+                rates[k, j - 1] = 1.0 if prismatic[j - 1] else reach(j, body)
+        return rates
+
+
+def _slope_bound(path: JointPath):  # noqa: ANN202
+    """A function (a, b) → max |θ'_j| over [a, b] per joint, for intervals given as arrays,
+    exact per polynomial piece (θ' is quadratic between the path's breakpoints)."""
+    if isinstance(path, StraightPath):
+        slope = np.abs(path(np.zeros(1), 1)[0])
+        return lambda a, b: np.broadcast_to(slope, (np.size(a), slope.size))
+    if not isinstance(path, BSplinePath | SplinePath):
+        raise ConfigurationError(
+            f"a certified collision check needs a StraightPath, BSplinePath or SplinePath, got "
+            f"{type(path).__name__}"
+        )
+    edges = np.concatenate([[0.0], np.asarray(path.breakpoints, dtype=float), [path.s_end]])
+    lo, hi = edges[:-1], edges[1:]
+    mid = 0.5 * (lo + hi)
+    f0, fm, f1 = path(lo, 1), path(mid, 1), path(hi, 1)  # (P, n) each: a quadratic per piece
+    # q(x) on x ∈ [−1, 1]: q = fm + βx + αx², β = (f1 − f0)/2, α = (f1 + f0)/2 − fm
+    beta, alpha = 0.5 * (f1 - f0), 0.5 * (f1 + f0) - fm
+    with np.errstate(divide="ignore", invalid="ignore"):
+        x = np.where(alpha != 0.0, -beta / (2.0 * alpha), 0.0)
+    inside = np.abs(x) < 1.0
+    vertex = np.where(inside, np.abs(fm + beta * x + alpha * x * x), 0.0)
+    piece = np.maximum.reduce([np.abs(f0), np.abs(f1), vertex])  # (P, n)
+
+    def bound(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+        first = np.clip(np.searchsorted(edges, a, side="right") - 1, 0, lo.size - 1)
+        last = np.clip(np.searchsorted(edges, b, side="left") - 1, 0, lo.size - 1)
+        out = np.empty((np.size(a), piece.shape[1]))
+        for i, (f, l_) in enumerate(zip(first, last, strict=True)):
+            out[i] = piece[f : l_ + 1].max(axis=0)
+        return out
+
+    return bound
+
+
+def _convex(geometry: coal.CollisionGeometry, name: str) -> coal.CollisionGeometry:
+    """A mesh as its convex hull (coal's GJK/EPA then gives signed distances).
+
+    The hull is qhull's (SciPy) on the mesh's vertices, handed to coal with its hull vertices
+    only: coal's own ``buildConvexRepresentation`` keeps every vertex, and GJK's support search
+    on that graph stops at interior points (distances then depend on the previous query).
+    """
+    if not isinstance(geometry, coal.BVHModelBase):
+        return geometry
+    points = np.asarray(geometry.vertices(), dtype=float).reshape(-1, 3)
+    try:
+        hull = ConvexHull(points)
+    except QhullError as exc:
+        raise URDFError(f"the collision mesh of {name!r} has no volume: {exc}") from None
+    return coal.Convex.convexHull(list(points[hull.vertices]), False, None)
+
+
+def _coal_shape(shape: object, name: str) -> coal.CollisionGeometry:
+    if isinstance(shape, Box):
+        return coal.Box(*shape.size)
+    if isinstance(shape, Sphere):
+        return coal.Sphere(shape.radius)
+    if isinstance(shape, Cylinder):
+        return coal.Cylinder(shape.radius, shape.length)
+    if isinstance(shape, Capsule):
+        return coal.Capsule(shape.radius, shape.length)
+    if isinstance(shape, HalfSpace):
+        return coal.Halfspace(np.asarray(shape.normal, dtype=float), shape.offset)
+    if isinstance(shape, Mesh):
+        try:
+            bvh = coal.MeshLoader().load(str(shape.path), np.full(3, shape.scale))
+        except (RuntimeError, ValueError) as exc:
+            raise SceneError(f"obstacle {name!r}: cannot load the mesh {shape.path}: {exc}",
+                             obstacle=name, field="mesh") from None
+        try:
+            return _convex(bvh, name)
+        except URDFError:
+            raise SceneError(f"obstacle {name!r}: the mesh {shape.path} has no volume",
+                             obstacle=name, field="mesh") from None
+    raise SceneError(f"obstacle {name!r}: unknown shape {type(shape).__name__}", obstacle=name)
+
+
+def _srdf_disabled(path: Path) -> set[frozenset[str]]:
+    """The SRDF's ``<disable_collisions link1= link2=>`` pairs."""
+    try:
+        root = ET.parse(path).getroot()
+    except (OSError, ET.ParseError) as exc:
+        raise URDFError(f"cannot read the SRDF {path}: {exc}", path=str(path)) from None
+    return {frozenset((e.get("link1", ""), e.get("link2", "")))
+            for e in root.iter("disable_collisions")}
+

@@ -1,0 +1,174 @@
+"""A first collision-free path when the straight line collides: OMPL's RRT-Connect and its path
+simplifier in joint space, fitted to stage 2's B-spline.
+
+OMPL plans with a clearance larger than the margin (``clearance``) so that the B-spline, which
+cuts the corners of OMPL's polyline, keeps the margin; every straight piece OMPL accepts is
+certified collision-free by :meth:`CollisionModel.path_clearance` (not sampled at a resolution).
+The fitted B-spline is certified too; if it is not, more control points follow the polyline more
+closely.
+
+OMPL's random generator is seeded once per process (OMPL allows no reseeding): the first plan of
+a process is reproducible, later ones draw further from the same stream.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..errors import CollisionError, ConfigurationError
+from ..path import BSplinePath, StraightPath
+
+if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
+    from .model import CollisionModel
+
+__all__ = ["collision_free_path", "fit_polyline", "OMPL_SEED"]
+
+OMPL_SEED = 20260101
+_seeded = False
+
+
+def collision_free_path(
+    collisions: CollisionModel,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    *,
+    control_points: int,
+    breaks: NDArray[np.float64] | None,
+    time_limit: float,
+    clearance: float | None = None,
+) -> BSplinePath:
+    """A path from θ0 to θe whose every pair keeps the margin, certified.
+
+    Parameters
+    ----------
+    collisions
+        The bodies, the pairs and the margin.
+    q0, qe
+        Start and goal [rad or m], shape (n,), both clear of the margin.
+    control_points
+        Interior control points K of the returned B-spline (more if K cannot follow OMPL's path
+        within the margin, up to 8 K).
+    breaks
+        Interior knots of the B-spline (as :class:`~nearopt.BSplinePath`), for K points.
+    time_limit
+        Budget for OMPL's search and simplification [s].
+    clearance
+        The distance OMPL keeps [m] (default: margin + 2 cm).
+
+    Raises
+    ------
+    CollisionError
+        When no collision-free path is found within the time limit.
+    """
+    try:
+        from ompl import base as ob
+        from ompl import geometric as og
+        from ompl import util as ou
+    except ImportError as exc:  # pragma: no cover - ompl is a dependency
+        raise ConfigurationError(
+            f"a collision-free start needs OMPL: pip install ompl ({exc})"
+        ) from None
+    global _seeded
+    if not _seeded:
+        ou.setLogLevel(ou.LOG_NONE)
+        ou.RNG.setSeed(OMPL_SEED)
+        _seeded = True
+    margin = collisions.margin
+    clearance = margin + 0.02 if clearance is None else clearance
+    robot = collisions.robot
+    n = robot.n
+    lim = robot.limits
+    lower = np.where(np.isfinite(lim.position_lower), lim.position_lower,
+                     np.minimum(q0, qe) - np.pi)
+    upper = np.where(np.isfinite(lim.position_upper), lim.position_upper,
+                     np.maximum(q0, qe) + np.pi)
+    for q, what in ((q0, "start"), (qe, "goal")):
+        collisions.check_configuration(q, what)
+    space = ob.RealVectorStateSpace(n)
+    bounds = ob.RealVectorBounds(n)
+    for i in range(n):
+        bounds.setLow(i, float(lower[i]))
+        bounds.setHigh(i, float(upper[i]))
+    space.setBounds(bounds)
+    setup = og.SimpleSetup(space)
+    info = setup.getSpaceInformation()
+    # the ends may be closer than `clearance` (not than the margin): OMPL's states near them are
+    # held to the margin, the rest to the clearance
+    end_distance = max(float(np.max(np.abs(upper - lower))) * 0.05, 1e-3)
+
+    def level(q: NDArray[np.float64]) -> float:
+        near = min(np.max(np.abs(q - q0)), np.max(np.abs(q - qe))) < end_distance
+        return margin if near else clearance
+
+    def valid(state: object) -> bool:
+        q = np.array(state[0:n])  # type: ignore[index]
+        d = collisions.distances(q)
+        return bool(d.size == 0 or d.min() >= level(q))
+
+    class Motion(ob.MotionValidator):  # type: ignore[misc, name-defined]
+        def checkMotion(self, s1: object, s2: object) -> bool:  # noqa: N802 - OMPL's name
+            a, b = np.array(s1[0:n]), np.array(s2[0:n])  # type: ignore[index]
+            if np.array_equal(a, b):
+                return valid(s1)
+            lv = min(level(a), level(b))
+            return collisions.path_clearance(StraightPath(a, b), lv, samples=4).certified
+
+    setup.setStateValidityChecker(valid)
+    motion = Motion(info)
+    info.setMotionValidator(motion)
+    start, goal = info.allocState(), info.allocState()
+    start[0:n] = [float(x) for x in q0]
+    goal[0:n] = [float(x) for x in qe]
+    setup.setStartAndGoalStates(start, goal)
+    setup.setPlanner(og.RRTConnect(info))
+    t0 = time.perf_counter()
+    status = setup.solve(max(time_limit, 1e-3))
+    if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
+        raise CollisionError(
+            f"no collision-free path from the start to the goal found in {time_limit:.3g} s "
+            f"(OMPL RRT-Connect, clearance {clearance * 1e3:.0f} mm; the straight line collides)"
+        )
+    path = setup.getSolutionPath()
+    left = time_limit - (time.perf_counter() - t0)
+    if left > 0:
+        setup.getPathSimplifier().simplify(path, left)
+    points = np.array([s[0:n] for s in path.getStates()], dtype=float)
+    points[0], points[-1] = q0, qe
+    for k in (control_points, 2 * control_points, 4 * control_points, 8 * control_points):
+        spline = fit_polyline(points, k, breaks if k == control_points else None)
+        if collisions.path_clearance(spline).certified:
+            return spline
+    raise CollisionError(
+        "OMPL found a collision-free path but no B-spline of up to "
+        f"{8 * control_points} control points follows it within the margin "
+        f"{margin * 1e3:.0f} mm"
+    )
+
+
+def fit_polyline(
+    points: NDArray[np.float64], interior: int, breaks: NDArray[np.float64] | None = None
+) -> BSplinePath:
+    """A clamped cubic B-spline whose control points lie on a joint-space polyline at its
+    Greville abscissae by arc length (a straight polyline gives the line exactly).
+
+    Parameters
+    ----------
+    points
+        The polyline's vertices [rad or m], shape (m, n), m ≥ 2.
+    interior
+        Interior control points K.
+    breaks
+        Interior knots (default uniform).
+    """
+    seg = np.linalg.norm(np.diff(points, axis=0), axis=1)
+    arc = np.concatenate([[0.0], np.cumsum(seg)])
+    if arc[-1] <= 0.0:
+        raise ConfigurationError("the polyline has zero length")
+    u = BSplinePath.greville(interior + 2, breaks) * arc[-1]
+    control = np.column_stack([np.interp(u, arc, points[:, i]) for i in range(points.shape[1])])
+    return BSplinePath(control, breaks)
