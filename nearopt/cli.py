@@ -27,6 +27,7 @@ from typing import TYPE_CHECKING, NoReturn
 import numpy as np
 
 from .catalog import available_robots
+from .collision import Scene
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .export import csv_text, json_text
@@ -67,7 +68,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="plan for the chain of joints of the URDF that ends at this link (every "
                         "other joint held fixed at 0 within its limits)")
     p.add_argument("--base", metavar="LINK", help="the link that chain starts from (--tip)")
-    p.add_argument("--srdf", metavar="FILE", help="an SRDF file of the URDF (with --group)")
+    p.add_argument("--srdf", metavar="FILE",
+                   help="an SRDF of the URDF: its disabled collision pairs (and --group)")
     p.add_argument("--group", metavar="NAME",
                    help="plan for the joints of this SRDF group (a chain or a list of joints)")
     p.add_argument("--lock-at", nargs="+", default=[], metavar="JOINT=VALUE",
@@ -101,6 +103,16 @@ def _parser() -> argparse.ArgumentParser:
                         "or one per joint (default: none)")
     p.add_argument("--no-position-limits", action="store_true",
                    help="ignore joint position limits")
+    p.add_argument("--scene", metavar="FILE",
+                   help="obstacles (TOML): every link keeps the margin from them and from the "
+                        "other links along the whole motion")
+    p.add_argument("--margin", type=float, metavar="M",
+                   help="clearance kept [m] (default: the scene's, else 0.01)")
+    selfc = p.add_mutually_exclusive_group()
+    selfc.add_argument("--self-collision", action="store_true", default=None,
+                       help="keep the links apart (the default with --scene)")
+    selfc.add_argument("--no-self-collision", dest="self_collision", action="store_false",
+                       help="do not check the links against each other")
     p.add_argument("--json", metavar="FILE",
                    help="write the planned motion as JSON (- for the standard output)")
     p.add_argument("--csv", metavar="FILE", help="write the same samples as CSV (- likewise)")
@@ -150,7 +162,7 @@ def _check_request(args: argparse.Namespace) -> None:
         raise ConfigurationError(
             f"--time-limit must be a positive number of seconds (inf: none), got {args.time_limit}"
         )
-    for option in ("lock", "tip", "base", "lock_at", "srdf"):
+    for option in ("lock", "tip", "base", "lock_at"):
         if getattr(args, option) and not args.urdf:
             raise ConfigurationError(
                 f"--{option.replace('_', '-')} applies to --urdf (a named robot chooses its own "
@@ -158,8 +170,14 @@ def _check_request(args: argparse.Namespace) -> None:
             )
     if args.base and not args.tip:
         raise ConfigurationError("--base needs --tip: the chain goes from the base to the tip")
-    if bool(args.srdf) != bool(args.group):
-        raise ConfigurationError("--srdf and --group go together: the group is read from the SRDF")
+    if args.group and not args.urdf:
+        raise ConfigurationError("--group applies to --urdf (a named robot chooses its own joints)")
+    if args.group and not args.srdf:
+        raise ConfigurationError("--group needs --srdf: the group is read from the SRDF")
+    if args.margin is not None and not (np.isfinite(args.margin) and args.margin >= 0):
+        raise ConfigurationError(f"--margin must be a distance ≥ 0 [m], got {args.margin}")
+    if args.margin is not None and not args.scene and not args.self_collision:
+        raise ConfigurationError("--margin applies with --scene or --self-collision")
     if args.group and args.tip:
         raise ConfigurationError("give the arm as --tip or as an SRDF --group, not both")
     if args.plots:
@@ -188,7 +206,7 @@ def _lock_values(pairs: list[str]) -> dict[str, float]:
 def _robot(args: argparse.Namespace) -> Robot:
     """The arm, with the limits the command line overrides."""
     if args.robot:
-        robot = Robot.from_name(args.robot)
+        robot = Robot.from_name(args.robot, **({"srdf": args.srdf} if args.srdf else {}))
     else:
         robot = Robot.from_urdf(
             args.urdf, locked_joints=tuple(args.lock), tip=args.tip, base=args.base,
@@ -230,6 +248,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
             f"got {len(args.weights)}"
         )
     q0, qe = (np.deg2rad(v) if args.deg else np.asarray(v) for v in (args.q0, args.qe))
+    scene = Scene.from_file(args.scene) if args.scene else None
 
     def progress(entry: Iteration) -> None:
         print(_format(entry), file=out, flush=True)
@@ -244,10 +263,17 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
             velocity_limits=not args.no_velocity_limits,
             position_limits=not args.no_position_limits,
             callback=None if args.quiet or args.stage1_only else progress,
+            scene=scene,
+            margin=args.margin,
+            self_collision=args.self_collision,
         )
     print(f"{result.status}: J = {result.J:.6f} (straight line {result.initial.J:.6f}), "
           f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
           f"{result.wall_time:.2f} s ({result.message})", file=out)
+    if result.clearance is not None:
+        c = result.clearance
+        print(f"clearance: closest {c.closest.pair} {c.closest.distance * 1e3:.1f} mm "
+              f"(margin {c.level * 1e3:.1f} mm, certified along the whole path)", file=out)
     if args.rate * result.duration > MAX_SAMPLES:
         raise ConfigurationError(
             f"--rate {args.rate:g} Hz over te = {result.duration:.4g} s gives more than "
@@ -257,7 +283,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     report = verify(
         result.trajectory, robot, rate=max(args.rate, 1000.0), q0=q0, qe=qe, cost=result.cost,
         J=result.J, velocity_limits=not args.no_velocity_limits,
-        position_limits=not args.no_position_limits,
+        position_limits=not args.no_position_limits, collisions=result.collisions,
     )
     if args.verify:
         print(report, file=out)

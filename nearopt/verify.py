@@ -21,6 +21,7 @@ from .errors import ConfigurationError, NearoptError
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
+    from .collision import CollisionModel
     from .cost import Cost
     from .robot import Robot
     from .trajectory import Trajectory
@@ -139,6 +140,7 @@ def verify(
     simulation_tolerance: float = 1e-5,
     window: float = 0.25,
     simulate: bool = True,
+    collisions: CollisionModel | None = None,
 ) -> VerificationReport:
     """Check a motion at a controller rate, from the robot model alone.
 
@@ -180,6 +182,9 @@ def verify(
     simulate
         Run the forward simulation (the slowest check); without it, the report holds the checks
         of the samples only.
+    collisions
+        Check the signed distance of every pair of this model at every sample against its margin
+        (the report gives the closest pair, its distance and when) [m].
 
     Raises
     ------
@@ -226,6 +231,13 @@ def verify(
     k, i = np.unravel_index(np.argmax(rest), rest.shape)
     checks.append(Check("rest at both ends", float(rest[k, i]), end_tolerance, "rad/s",
                         f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}"))
+    if collisions is not None and collisions.pairs:
+        dist = np.array([collisions.distances(x) for x in q])
+        k_t, k_p = np.unravel_index(np.argmin(dist), dist.shape)
+        closest = float(dist[k_t, k_p])
+        checks.append(Check("clearance (coal)", collisions.margin - closest, 0.0, "m",
+                            f"{collisions.pairs[k_p]} {closest * 1e3:.2f} mm apart at t = "
+                            f"{t[k_t]:.4f} s (margin {collisions.margin * 1e3:.1f} mm)"))
     if cost is not None and J is not None:
         tf, weight = _simpson_nodes(trajectory.t, max(rate, 20000.0))
         qf, qdf, qddf = trajectory.states(tf)

@@ -9,8 +9,9 @@ second. The checked pairs are
 * every link with every obstacle, except bodies fixed to the base (they cannot move; the table
   the base stands on touches it);
 * every two links, except those on the same joint or on adjacent joints (parent and child), the
-  SRDF's ``<disable_collisions>`` pairs, and, for a robot without an SRDF, the pairs already in
-  contact at the neutral configuration (MoveIt's setup assistant's "default" rule).
+  SRDF's ``<disable_collisions>`` pairs, and the pairs already in contact at the neutral
+  configuration (0 within the limits; MoveIt's setup assistant's "default" rule, which the SRDFs
+  of kinova and z1 lack).
 
 The gradient of d (Pinocchio and coal give none) comes from the nearest points and the joint
 Jacobians: ∂d/∂θ = nᵀ (J₂(p2) − J₁(p1)), J_k(p) the Jacobian of the point p fixed to body k.
@@ -187,7 +188,7 @@ class CollisionModel:
         self._data = model.createData()
         self._gdata = pin.GeometryData(geom)
         self._configure()
-        if srdf_path is None and self_collision and pairs:  # MoveIt's "default" rule
+        if self_collision and pairs:  # MoveIt's "default" rule (kinova's, z1's SRDFs lack it)
             q = np.clip(np.zeros(model.nq), robot.limits.position_lower,
                         robot.limits.position_upper)
             d = self._all(q)
@@ -198,8 +199,7 @@ class CollisionModel:
                 for a, b in pairs:
                     geom.addCollisionPair(pin.CollisionPair(int(a), int(b)))
                 self._gdata = pin.GeometryData(geom)
-                for req in self._gdata.distanceRequests:
-                    req.enable_nearest_points = True
+                self._configure()
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self.pairs = tuple(Pair(self._names[a], self._names[b]) for a, b in self._pairs)
         self.motion_rates = self._motion_rates()
@@ -347,10 +347,14 @@ class CollisionModel:
 
     # ------------------------------------------------------------------ internals
     def _configure(self) -> None:
-        for req in self._gdata.distanceRequests:  # distances to 1e-8 m: gradients to 1e-4 by FD
-            req.enable_nearest_points = True
-            req.gjk_tolerance = 1e-8
-            req.epa_tolerance = 1e-8
+        # GJK stops on an absolute duality gap: distances to ~1e-8 m on finely faceted hulls
+        # (the default relative criterion leaves ~1e-6 m of noise on kinova's links)
+        for req in self._gdata.distanceRequests:
+            req.enable_signed_distance = True
+            req.gjk_convergence_criterion = coal.GJKConvergenceCriterion.DualityGap
+            req.gjk_convergence_criterion_type = coal.GJKConvergenceCriterionType.Absolute
+            req.gjk_tolerance = 1e-10
+            req.epa_tolerance = 1e-10
 
     def _all(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         if not self.geometry.collisionPairs:

@@ -235,16 +235,15 @@ def collision_rows(
     q = path(sigma)
     basis = path.basis(sigma)[:, 1:-1]  # (S, K)
     dist = np.array([collisions.distances(x) for x in q])  # (S, P)
-    moved = 2.0 * collisions.motion_rates @ reach  # (P,): how far the step can move each pair
-    # rows where a pair could reach m⁺: at its local minima along σ, ± 3 checks (the minimum
-    # moves with the path), and wherever it is already within m⁺ + 1 cm
+    moved = collisions.motion_rates @ reach  # (P,): how far the step can move each pair
+    # rows where a pair could reach m⁺: at its local minima along σ and their neighbours (the
+    # minimum moves with the path), and wherever it is already within m⁺ + 5 mm
     low = np.zeros(dist.shape, dtype=bool)
     low[1:-1] = (dist[1:-1] <= dist[:-2]) & (dist[1:-1] <= dist[2:])
     low[[0, -1]] = True
-    for shift in (1, 2, 3):
-        low[shift:] |= low[:-shift]
-        low[:-shift] |= low[shift:]
-    keep = (dist - inner <= moved) & (low | (dist < inner + 0.01))
+    low[1:] |= low[:-1].copy()
+    low[:-1] |= low[1:].copy()
+    keep = (dist - inner <= moved) & (low | (dist < inner + 0.005))
     keep[:, :] &= np.any(basis != 0.0, axis=1)[:, None]
     blocks, lower = [], []
     for m in np.flatnonzero(keep.any(axis=1)):

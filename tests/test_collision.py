@@ -1,0 +1,355 @@
+"""Collisions (#11): distances and their gradients, the pairs checked, the certified path check,
+plans that keep the margin from a table, a post and the arm itself, and bad scenes.
+
+Independent checks: distances to a half-space against the hull vertices' heights, gradients
+against central differences, and every plan sampled at 2 kHz with coal's own ``distance`` on
+bodies placed from Pinocchio's frame placements (not the planner's ``computeDistances``).
+"""
+
+from __future__ import annotations
+
+import subprocess
+import sys
+import xml.etree.ElementTree as ET
+
+import coal
+import numpy as np
+import pinocchio as pin
+import pytest
+from checks import RATE, assert_independent_checks
+from conftest import load, random_configuration
+from scipy.spatial import ConvexHull
+
+import nearopt
+from nearopt import CollisionError, Scene, SceneError, TorqueCost, plan
+from nearopt.collision import (
+    Box,
+    CollisionModel,
+    Cylinder,
+    HalfSpace,
+    Obstacle,
+    Sphere,
+)
+from nearopt.path import StraightPath
+
+ARMS = ["ur5", "panda", "xarm7", "kinova", "z1"]
+
+CELL = Scene((
+    Obstacle("table", Box((1.2, 1.2, 0.04)), (0.3, 0.0, -0.03)),
+    Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5)),
+), margin=0.01)
+
+# start and goal on either side of the post, the straight line through it
+MOTIONS = {
+    "ur5": ([-0.8, -1.2, 1.2, -1.5, -1.57, 0.0], [0.8, -1.2, 1.2, -1.5, -1.57, 0.0]),
+    "panda": ([-0.8, 0.3, 0.0, -1.8, 0.0, 2.1, 0.8], [0.8, 0.3, 0.0, -1.8, 0.0, 2.1, 0.8]),
+}
+
+
+def independent_distances(cm: CollisionModel, q: np.ndarray) -> np.ndarray:
+    """Every checked pair's signed distance with coal.distance on bodies placed from
+    Pinocchio's joint placements (the obstacles from their records)."""
+    robot = cm.robot
+    data = robot.model.createData()
+    pin.forwardKinematics(robot.model, data, q)
+    out = []
+    for cp in cm.geometry.collisionPairs:
+        placed = []
+        for g in (cp.first, cp.second):
+            obj = cm.geometry.geometryObjects[g]
+            m = data.oMi[obj.parentJoint] * obj.placement  # joint 0: the base frame
+            placed += [obj.geometry, coal.Transform3s(m.rotation, m.translation)]
+        out.append(coal.distance(*placed, coal.DistanceRequest(), coal.DistanceResult()))
+    return np.array(out)
+
+
+def dense_min_distance(cm: CollisionModel, trajectory: nearopt.Trajectory) -> tuple[float, str]:
+    """The least signed distance of any pair over the motion sampled at 2 kHz [m]."""
+    q = trajectory.sample(RATE).q
+    d = np.array([independent_distances(cm, x) for x in q])
+    k = np.unravel_index(np.argmin(d), d.shape)
+    return float(d[k]), str(cm.pairs[k[1]])
+
+
+# ---------------------------------------------------------------- distances and gradients
+@pytest.mark.parametrize("name", ARMS)
+def test_distance_gradients_match_central_differences(name: str, rng: np.random.Generator) -> None:
+    robot = load(name)
+    cm = CollisionModel(robot, Scene((Obstacle("ball", Sphere(0.1), (0.4, 0.2, 0.4)),
+                                      Obstacle("floor", HalfSpace((0, 0, 1), -0.3)))))
+    checked = 0
+    for _ in range(8):
+        q = random_configuration(robot, rng)
+        d, grad = cm.distance_gradients(q)
+        separated = d > 0.005  # nearest points away from contact: d is differentiable
+        h = 1e-4  # distances are exact to ~1e-8 m (GJK): smaller steps measure that
+        d0 = cm.distances(q)
+        up = np.column_stack([cm.distances(q + h * e) for e in np.eye(robot.n)])
+        down = np.column_stack([cm.distances(q - h * e) for e in np.eye(robot.n)])
+        forward, backward = (up - d0[:, None]) / h, (d0[:, None] - down) / h
+        central = 0.5 * (forward + backward)
+        tol = 2e-4
+        smooth = np.abs(grad - central) <= tol
+        # where a face, edge or vertex of a hull takes over within ±h, d has a kink: the
+        # one-sided slopes bracket the gradient of the nearest points found
+        bracket = ((grad >= np.minimum(forward, backward) - tol)
+                   & (grad <= np.maximum(forward, backward) + tol))
+        assert np.all((smooth | bracket)[separated]), (name, np.abs(grad - central).max())
+        assert np.mean(smooth[separated]) > 0.9
+        checked += int(separated.sum())
+    assert checked > 50
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_the_distance_to_a_floor_is_the_lowest_hull_vertex(name: str, rng: np.random.Generator
+                                                           ) -> None:
+    robot = load(name)
+    floor = -0.5
+    cm = CollisionModel(robot, Scene((Obstacle("floor", HalfSpace((0, 0, 1), floor)),)),
+                        self_collision=False)
+    raw = robot.collision_geometry()
+    data = robot.model.createData()
+    for _ in range(5):
+        q = random_configuration(robot, rng)
+        pin.forwardKinematics(robot.model, data, q)
+        d = cm.distances(q)
+        for k, cp in enumerate(cm.geometry.collisionPairs):
+            obj = raw.geometryObjects[cp.first]
+            g = obj.geometry
+            if isinstance(g, coal.BVHModelBase):
+                pts = np.asarray(g.vertices()).reshape(-1, 3)
+                pts = pts[ConvexHull(pts).vertices]
+            elif isinstance(g, coal.Box):
+                pts = np.array(np.meshgrid(*[[-h, h] for h in g.halfSide])).reshape(3, -1).T
+            else:
+                continue
+            m = data.oMi[obj.parentJoint] * obj.placement  # relative to the joint
+            height = (pts @ m.rotation.T + m.translation)[:, 2].min()
+            assert d[k] == pytest.approx(height - floor, abs=1e-7)
+
+
+def test_pairs_exclude_adjacent_links_and_the_srdf_s_disabled_pairs() -> None:
+    robot = load("panda")
+    cm = CollisionModel(robot)
+    disabled = {frozenset((e.get("link1"), e.get("link2")))
+                for e in ET.parse(robot.srdf).getroot().iter("disable_collisions")}
+    names = {str(p) for p in cm.pairs}
+    assert names and not any(frozenset((p.first, p.second)) in disabled for p in cm.pairs)
+    assert "panda_link1 ↔ panda_link2" not in names  # adjacent
+    assert "panda_link1 ↔ panda_link7" in names  # far apart in the chain, not in the SRDF
+    with_all = CollisionModel(robot, srdf=_empty_srdf(robot))
+    assert len(with_all.pairs) > len(cm.pairs)
+    assert not CollisionModel(robot, self_collision=False).pairs
+
+
+def _empty_srdf(robot: nearopt.Robot) -> str:
+    import tempfile
+    f = tempfile.NamedTemporaryFile("w", suffix=".srdf", delete=False)
+    f.write(f'<robot name="{robot.name}"></robot>')
+    f.close()
+    return f.name
+
+
+# ---------------------------------------------------------------- the certified path check
+def test_a_thin_wall_between_checks_is_not_tunnelled_through() -> None:
+    """The wrist sweeps 2.4 rad at ~0.8 m: 8 checks are 24 cm apart there, and a 6 × 6 cm plate
+    4 mm thick halfway between two of them is missed by the checks, not by the certificate."""
+    robot = load("ur5")
+    q0 = np.array([-1.2, -0.6, 0.0, -1.57, 0.0, 0.0])
+    qe = np.array([1.2, -0.6, 0.0, -1.57, 0.0, 0.0])
+    line = StraightPath(q0, qe)
+    s_wall = 3.5 / 8  # between the 4th and 5th check
+    tip = robot.frame_position(line([s_wall])[0], "wrist_3_link")
+    angle = np.arctan2(tip[1], tip[0])
+    radius = np.hypot(tip[0], tip[1])
+    wall = Obstacle("wall", Box((0.06, 0.004, 0.06)),
+                    (radius * np.cos(angle), radius * np.sin(angle), tip[2]),
+                    (0.0, 0.0, angle))  # thin along the motion
+    cm = CollisionModel(robot, Scene((wall,), margin=0.0), self_collision=False)
+    sampled = np.array([cm.distances(q) for q in line(np.linspace(0, 1, 9))])
+    assert sampled.min() > 0.0  # the 8 checks alone see no contact
+    dense = np.array([cm.distances(q) for q in line(np.linspace(0, 1, 20001))])
+    assert dense.min() < 0.0  # but the motion goes through the wall
+    clearance = cm.path_clearance(line, samples=8)
+    assert not clearance.certified
+    assert clearance.closest.distance < 0.0 and "wall" in str(clearance.closest.pair)
+    # without the wall the same check certifies the path, and the dense samples agree
+    far = CollisionModel(robot, Scene((Obstacle("wall", Box((0.3, 0.004, 0.3)),
+                                                (3.0, 3.0, 0.0)),), margin=0.0),
+                         self_collision=False)
+    assert far.path_clearance(line, samples=8).certified
+
+
+def test_the_certificate_holds_on_dense_samples(rng: np.random.Generator) -> None:
+    robot = load("panda")
+    cm = CollisionModel(robot, CELL)
+    for _ in range(6):
+        q0, qe = random_configuration(robot, rng), random_configuration(robot, rng)
+        line = StraightPath(q0, qe)
+        result = cm.path_clearance(line, samples=16)
+        dense = np.array([cm.distances(q) for q in line(np.linspace(0, 1, 4001))])
+        if result.certified:
+            assert dense.min() >= cm.margin - 1e-9
+        else:
+            assert result.closest.distance < cm.margin
+
+
+# ---------------------------------------------------------------- plans in a cell
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_plans_in_a_cell_keep_the_margin_and_the_limits(name: str) -> None:
+    robot = load(name)
+    q0, qe = (np.array(v) for v in MOTIONS[name])
+    cm = CollisionModel(robot, CELL)
+    line = nearopt.optimal_timing(robot, StraightPath(q0, qe), TorqueCost(0.001))
+    d_line, pair_line = dense_min_distance(cm, line.trajectory)
+    assert d_line < 0.0, "the straight line must go through the post"
+    result = plan(robot, q0, qe, TorqueCost(0.001), scene=CELL, time_limit=60.0)
+    d_plan, pair = dense_min_distance(cm, result.trajectory)
+    assert d_plan >= CELL.margin - 1e-6, (pair, d_plan)
+    assert result.clearance is not None and result.clearance.certified
+    assert_independent_checks(robot, result.trajectory, result.cost, result.J, q0, qe)
+    report = nearopt.verify(result.trajectory, robot, collisions=cm, simulate=False)
+    assert report.passed, report
+    # the optimisation improves the first path (OMPL's) a lot
+    assert result.J < 0.8 * result.initial.J
+    free = plan(robot, q0, qe, TorqueCost(0.001), time_limit=60.0)
+    assert result.J >= free.J * (1 - 1e-3)  # the cell costs something, never less
+
+
+def test_self_collision_is_avoided_where_the_free_optimum_collides() -> None:
+    robot = load("ur5")
+    lo, hi = robot.limits.position_lower, robot.limits.position_upper
+    q0, qe = lo + 0.3 * (hi - lo), lo + 0.7 * (hi - lo)
+    cm = CollisionModel(robot, margin=0.001)
+    free = plan(robot, q0, qe, time_limit=60.0)
+    d_free, pair = dense_min_distance(cm, free.trajectory)
+    assert d_free < 0.0, "the free optimum should go through the arm itself"
+    result = plan(robot, q0, qe, self_collision=True, margin=0.001, time_limit=60.0)
+    d_plan, pair = dense_min_distance(cm, result.trajectory)
+    assert d_plan >= 0.001 - 1e-6, (pair, d_plan)
+    assert_independent_checks(robot, result.trajectory, result.cost, result.J, q0, qe)
+
+
+def test_a_start_in_collision_names_the_pair_and_the_depth() -> None:
+    robot = load("ur5")
+    q0, qe = (np.array(v) for v in MOTIONS["ur5"])
+    inside = Scene((Obstacle("block", Box((0.3, 0.3, 0.3)),
+                             tuple(robot.frame_position(q0, "wrist_2_link"))),))
+    with pytest.raises(CollisionError, match=r"start configuration q0 collides: .*block "
+                                             r"penetrates by \d+\.\d mm") as info:
+        plan(robot, q0, qe, scene=inside)
+    assert info.value.distance < 0 and "block" in info.value.pair
+
+
+def test_no_path_found_in_time_is_an_error_not_a_colliding_plan() -> None:
+    """Shoulder and elbow held near their values, so the arm cannot fold over or around a wall
+    in front of it: no path exists; the planner says so within its time limit."""
+    q0, qe = (np.array(v) for v in MOTIONS["ur5"])
+    base = load("ur5")
+    lower, upper = base.limits.position_lower.copy(), base.limits.position_upper.copy()
+    lower[:3], upper[:3] = [-1.0, -1.3, 1.1], [1.0, -1.1, 1.3]
+    robot = base.with_limits(position=(lower, upper))
+    wall = Scene((Obstacle("wall", Box((2.0, 0.05, 4.0)), (1.45, 0.0, 0.0)),))
+    with pytest.raises(CollisionError, match=r"no collision-free path .* found in [\d.]+ s"):
+        plan(robot, q0, qe, scene=wall, time_limit=2.0)
+
+
+def test_verify_reports_the_closest_pair_of_a_colliding_motion() -> None:
+    robot = load("ur5")
+    q0, qe = (np.array(v) for v in MOTIONS["ur5"])
+    cm = CollisionModel(robot, CELL)
+    line = nearopt.optimal_timing(robot, StraightPath(q0, qe), TorqueCost(0.001))
+    report = nearopt.verify(line.trajectory, robot, collisions=cm, simulate=False)
+    check = next(c for c in report.checks if c.name.startswith("clearance"))
+    assert not check.passed and "post" in check.where
+
+
+# ---------------------------------------------------------------- scene files
+GOOD = """
+margin = 0.02
+[[obstacle]]
+name = "table"
+box = [1.2, 0.8, 0.04]
+position = [0.4, 0.0, -0.02]
+rpy = [0.0, 0.0, 0.1]
+[[obstacle]]
+name = "post"
+cylinder = [0.05, 0.6]
+position = [0.45, 0.25, 0.3]
+[[obstacle]]
+name = "ball"
+sphere = 0.1
+[[obstacle]]
+name = "bar"
+capsule = [0.02, 0.5]
+[[obstacle]]
+name = "floor"
+halfspace = [0.0, 0.0, 2.0, -0.04]
+[[obstacle]]
+name = "fixture"
+mesh = "fixture.stl"
+scale = 0.001
+position = [0.6, -0.3, 0.0]
+"""
+
+
+def _fixture_stl(folder) -> None:  # noqa: ANN001
+    import trimesh
+
+    trimesh.creation.box((100.0, 50.0, 20.0)).export(folder / "fixture.stl")
+
+
+def test_a_scene_file_is_read_with_every_shape(tmp_path) -> None:  # noqa: ANN001
+    (tmp_path / "cell.toml").write_text(GOOD)
+    _fixture_stl(tmp_path)
+    scene = Scene.from_file(tmp_path / "cell.toml")
+    assert scene.margin == 0.02 and [o.name for o in scene.obstacles] == [
+        "table", "post", "ball", "bar", "floor", "fixture"]
+    floor = scene.obstacles[4].shape
+    assert floor.normal == (0.0, 0.0, 1.0) and floor.offset == pytest.approx(-0.02)
+    cm = CollisionModel(load("ur5"), scene)
+    fixture = cm.geometry.geometryObjects[cm.geometry.getGeometryId("obstacle:fixture")]
+    fixture.geometry.computeLocalAABB()
+    assert np.allclose(np.ptp(np.array([fixture.geometry.aabb_local.min_,
+                                        fixture.geometry.aabb_local.max_]), axis=0),
+                       [0.1, 0.05, 0.02], atol=1e-9)
+
+
+@pytest.mark.parametrize(("text", "obstacle", "field"), [
+    ('[[obstacle]]\nname = "t"\nbox = [1.0, 0.8]\n', "t", "box"),
+    ('[[obstacle]]\nname = "t"\nbox = [1.0, -0.8, 0.1]\n', "t", "box"),
+    ('[[obstacle]]\nname = "t"\nsphere = "big"\n', "t", "sphere"),
+    ('[[obstacle]]\nname = "t"\nbox = [1, 1, 1]\nsphere = 0.2\n', "t", "shape"),
+    ('[[obstacle]]\nname = "t"\n', "t", "shape"),
+    ('[[obstacle]]\nname = "t"\nsphere = 0.1\ncolour = "red"\n', "t", "colour"),
+    ('[[obstacle]]\nname = "t"\nsphere = 0.1\nposition = [0, 0]\n', "t", "position"),
+    ('[[obstacle]]\nname = "t"\nhalfspace = [0, 0, 0, 1]\n', "t", "halfspace"),
+    ('[[obstacle]]\nname = "t"\nmesh = "missing.stl"\n', "t", "mesh"),
+    ('[[obstacle]]\nname = "t"\nsphere = 0.1\n[[obstacle]]\nname = "t"\nsphere = 0.2\n', "t",
+     "name"),
+    ("margin = -0.01\n", None, "margin"),
+    ("margins = 0.01\n", None, "margins"),
+])
+def test_a_bad_scene_file_names_the_obstacle_and_the_field(
+    tmp_path, text: str, obstacle: str | None, field: str  # noqa: ANN001
+) -> None:
+    path = tmp_path / "cell.toml"
+    path.write_text(text)
+    with pytest.raises(SceneError) as info:
+        Scene.from_file(path)
+    assert info.value.obstacle == obstacle and info.value.field == field
+    assert str(path) in str(info.value) and "\n" not in str(info.value)
+
+
+def test_the_cli_refuses_a_bad_scene_in_one_line_and_writes_nothing(tmp_path) -> None:  # noqa: ANN001
+    (tmp_path / "cell.toml").write_text('[[obstacle]]\nname = "post"\ncylinder = [0.05]\n')
+    out = tmp_path / "plan.json"
+    run = subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5",
+         "--q0", *map(str, MOTIONS["ur5"][0]), "--qe", *map(str, MOTIONS["ur5"][1]),
+         "--scene", str(tmp_path / "cell.toml"), "--json", str(out)],
+        capture_output=True, text=True, cwd=tmp_path, timeout=300,
+    )
+    assert run.returncode != 0 and not out.exists()
+    lines = run.stderr.strip().splitlines()
+    assert len(lines) == 1 and "'post'" in lines[0] and "cylinder" in lines[0], run.stderr
