@@ -32,6 +32,7 @@ from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .export import csv_text, json_text
 from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
+from .path import StraightPath
 from .planning import METHODS, Iteration, StopReason, plan
 from .robot import Robot
 from .verify import VerificationError, verify
@@ -267,7 +268,9 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
             margin=args.margin,
             self_collision=args.self_collision,
         )
-    print(f"{result.status}: J = {result.J:.6f} (straight line {result.initial.J:.6f}), "
+    first = "straight line" if isinstance(result.initial.trajectory.path, StraightPath) else (
+        "first path, from OMPL")
+    print(f"{result.status}: J = {result.J:.6f} ({first} {result.initial.J:.6f}), "
           f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
           f"{result.wall_time:.2f} s ({result.message})", file=out)
     if result.clearance is not None:

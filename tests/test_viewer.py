@@ -249,3 +249,45 @@ def test_converted_meshes_are_the_ones_pinocchio_loaded(name: str) -> None:
         for vertices, faces, rgba in parts:
             assert faces.min() >= 0 and faces.max() < len(vertices)
             assert np.all((rgba >= 0) & (rgba <= 1)) and rgba.shape == (4,)
+
+
+def test_the_exported_page_draws_the_obstacles_in_place(tmp_path: Path) -> None:
+    """A plan in a cell: the page holds every obstacle where the scene puts it, and they show."""
+    playwright = pytest.importorskip("playwright.sync_api")
+    from nearopt.collision import Box, Capsule, Cylinder, HalfSpace, Obstacle, Scene, Sphere
+
+    cell = Scene((
+        Obstacle("table", Box((1.2, 1.2, 0.04)), (0.3, 0.0, -0.03)),
+        Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5), (0.0, 0.1, 0.0)),
+        Obstacle("ball", Sphere(0.08), (-0.4, 0.3, 0.5)),
+        Obstacle("bar", Capsule(0.03, 0.4), (-0.4, -0.4, 0.4), (0.3, 0.0, 0.0)),
+        Obstacle("floor", HalfSpace((0.0, 0.0, 1.0), -0.2)),
+    ))
+    result = nearopt.plan(load("ur5"), [-0.8, -1.2, 1.2, -1.5, -1.57, 0.0],
+                          [0.8, -1.2, 1.2, -1.5, -1.57, 0.0], nearopt.TimeCost(), grid=60,
+                          max_iterations=2, scene=cell)
+    html = export_html(result, tmp_path / "cell.html")
+    visual = result.robot.visual_model()
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+        page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
+        _open(page, html.resolve().as_uri(), len(visual.geometryObjects) + 7)
+        for ob in cell.obstacles[:4]:
+            shown = np.reshape(page.evaluate(PLACEMENT, ["meshcat", "obstacles", ob.name]),
+                               (4, 4))
+            np.testing.assert_allclose(shown[:3, 3], ob.position, atol=1e-9, err_msg=ob.name)
+            np.testing.assert_allclose(shown[:3, :3], ob.rotation(), atol=1e-9,
+                                       err_msg=ob.name)
+        # the floor's slab: its top face on z = −0.2
+        slab = np.reshape(page.evaluate(PLACEMENT, ["meshcat", "obstacles", "floor", "slab"]),
+                          (4, 4))
+        assert slab[2, 3] + 0.005 == pytest.approx(-0.2, abs=1e-9)
+        page.wait_for_timeout(300)
+        page.screenshot(path=tmp_path / "with.png")
+        _visible(page, ["meshcat", "obstacles"], False)
+        page.wait_for_timeout(300)
+        page.screenshot(path=tmp_path / "without.png")
+        browser.close()
+    changed = np.any(np.abs(_pixels(tmp_path / "with.png") - _pixels(tmp_path / "without.png"))
+                     > 25, axis=2)
+    assert changed.mean() > 0.05  # the obstacles cover a good part of the view

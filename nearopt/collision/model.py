@@ -32,6 +32,7 @@ nearopt's paths), so the certificate is a proof, not a sample.
 
 from __future__ import annotations
 
+import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
@@ -202,6 +203,8 @@ class CollisionModel:
                 self._configure()
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self.pairs = tuple(Pair(self._names[a], self._names[b]) for a, b in self._pairs)
+        self.seconds = 0.0
+        """Time spent computing distances (all pairs at a configuration) so far [s]."""
         self.motion_rates = self._motion_rates()
         """R_j of every pair: how fast its distance can change per unit of θ'_j [m/rad or
         m/m], shape (len(pairs), n) (see the module docstring)."""
@@ -359,8 +362,11 @@ class CollisionModel:
     def _all(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         if not self.geometry.collisionPairs:
             return np.zeros(0)
+        t0 = time.perf_counter()
         pin.computeDistances(self.robot.model, self._data, self.geometry, self._gdata, q)
-        return np.array([r.min_distance for r in self._gdata.distanceResults])
+        d = np.array([r.min_distance for r in self._gdata.distanceResults])
+        self.seconds += time.perf_counter() - t0
+        return d
 
     def _body(self, i: int) -> str:
         obj = self.geometry.geometryObjects[i]

@@ -41,8 +41,10 @@ def collision_free_path(
     breaks: NDArray[np.float64] | None,
     time_limit: float,
     clearance: float | None = None,
-) -> BSplinePath:
-    """A path from θ0 to θe whose every pair keeps the margin, certified.
+    attempts: int = 3,
+) -> list[BSplinePath]:
+    """Paths from θ0 to θe whose every pair keeps the margin, certified: one per OMPL search
+    that succeeds (they may pass the obstacles on different sides).
 
     Parameters
     ----------
@@ -59,11 +61,14 @@ def collision_free_path(
         Budget for OMPL's search and simplification [s].
     clearance
         The distance OMPL keeps [m] (default: margin + 2 cm).
+    attempts
+        Independent OMPL searches, sharing the time limit.
 
     Raises
     ------
     CollisionError
-        When no collision-free path is found within the time limit.
+        When no collision-free path is found within the time limit (or no B-spline of up to
+        8 K control points follows OMPL's within the margin).
     """
     try:
         from ompl import base as ob
@@ -127,27 +132,30 @@ def collision_free_path(
     setup.setStartAndGoalStates(start, goal)
     setup.setPlanner(og.RRTConnect(info))
     t0 = time.perf_counter()
-    status = setup.solve(max(time_limit, 1e-3))
-    if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
+    found: list[BSplinePath] = []
+    for attempt in range(attempts):
+        left = time_limit - (time.perf_counter() - t0)
+        if attempt and left < 0.25 * time_limit:
+            break
+        setup.clear()
+        status = setup.solve(max(left / (attempts - attempt), 1e-3))
+        if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
+            continue
+        path = setup.getSolutionPath()
+        setup.getPathSimplifier().simplify(path, max(0.2 * left / attempts, 1e-3))
+        points = np.array([s[0:n] for s in path.getStates()], dtype=float)
+        points[0], points[-1] = q0, qe
+        for k in (control_points, 2 * control_points, 4 * control_points, 8 * control_points):
+            spline = fit_polyline(points, k, breaks if k == control_points else None)
+            if collisions.path_clearance(spline).certified:
+                found.append(spline)
+                break
+    if not found:
         raise CollisionError(
             f"no collision-free path from the start to the goal found in {time_limit:.3g} s "
             f"(OMPL RRT-Connect, clearance {clearance * 1e3:.0f} mm; the straight line collides)"
         )
-    path = setup.getSolutionPath()
-    left = time_limit - (time.perf_counter() - t0)
-    if left > 0:
-        setup.getPathSimplifier().simplify(path, left)
-    points = np.array([s[0:n] for s in path.getStates()], dtype=float)
-    points[0], points[-1] = q0, qe
-    for k in (control_points, 2 * control_points, 4 * control_points, 8 * control_points):
-        spline = fit_polyline(points, k, breaks if k == control_points else None)
-        if collisions.path_clearance(spline).certified:
-            return spline
-    raise CollisionError(
-        "OMPL found a collision-free path but no B-spline of up to "
-        f"{8 * control_points} control points follows it within the margin "
-        f"{margin * 1e3:.0f} mm"
-    )
+    return found
 
 
 def fit_polyline(

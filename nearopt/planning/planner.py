@@ -27,7 +27,7 @@ import numpy as np
 from ..collision import Clearance, CollisionModel, Scene
 from ..collision.sampling import collision_free_path
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
-from ..errors import ConfigurationError, SolverError
+from ..errors import ConfigurationError, InfeasiblePathError, SolverError
 from ..path import Path, StraightPath
 from ..robot import Robot
 from ..timing import MAX_GRID, TimingResult, optimal_timing
@@ -171,11 +171,24 @@ def plan(
             k = options.control_points
             if options.knots == "clustered":
                 breaks = 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, k)[1:-1]))
-            start = collision_free_path(
+            # a few OMPL paths (around the obstacles on different sides), the cheapest first
+            starts = collision_free_path(
                 collisions, q0, qe, control_points=k, breaks=breaks,
-                time_limit=max(0.5 * (t_start + time_limit - time.perf_counter()), 1e-3),
+                time_limit=min(max(0.25 * (t_start + time_limit - time.perf_counter()), 1e-3),
+                               5.0),
             )
-            line = start
+            timed = []
+            for candidate in starts:
+                try:
+                    timed.append((optimal_timing(robot, candidate, cost, grid=options.grid,
+                                                 velocity_limits=velocity_limits).J, candidate))
+                except (InfeasiblePathError, SolverError):
+                    continue
+            if not timed:
+                raise InfeasiblePathError(
+                    "no collision-free path OMPL found can be timed within the limits"
+                )
+            start = line = min(timed, key=lambda x: x[0])[1]
     try:
         initial = optimal_timing(robot, line, cost, grid=grid, velocity_limits=velocity_limits,
                                  time_limit=t_start + time_limit - time.perf_counter())

@@ -39,6 +39,7 @@ from meshcat.animation import Animation
 from meshcat.servers.tree import SceneTree, find_node, walk
 from pinocchio.visualize.meshcat_visualizer import loadPrimitive as load_primitive
 
+from ..collision.scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sphere
 from ..errors import ConfigurationError, NearoptError
 from ..outputs import write_atomically
 from .geometry import chain_points, plane_axes, tip_path
@@ -52,7 +53,7 @@ if TYPE_CHECKING:
 
 __all__ = [
     "export_html", "show", "LiveViewer", "scene_html", "plan_html", "scene_view", "SceneView",
-    "mesh_parts",
+    "mesh_parts", "draw_obstacles",
 ]
 
 _VIEWER_JS = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
@@ -194,8 +195,10 @@ def _draw(
     trajectory: Trajectory,
     initial: Trajectory | None,
     fps: float,
+    scene: Scene | None = None,
 ) -> None:
-    """Load the arm, its animation (paused at t = 0), the trails, floor and camera into meshcat."""
+    """Load the arm, its animation (paused at t = 0), the trails, floor, obstacles and camera
+    into meshcat."""
     if not (np.isfinite(fps) and fps > 0):
         raise ConfigurationError(f"fps must be a positive number, got {fps}")
     visual = robot.visual_model()
@@ -220,6 +223,8 @@ def _draw(
                 vis[path].set_transform(placement)
     view = scene_view(robot, q)
     _floor_grid(vis, view)
+    if scene is not None:
+        draw_obstacles(vis, scene, view)
     _trail(vis, "planned", tip_path(robot, trajectory), 0xD62728)
     if initial is not None:
         _trail(vis, "initial", tip_path(robot, initial), 0x888888)
@@ -259,6 +264,56 @@ def _load_visuals(vis: meshcat.Visualizer, robot: Robot, visual: pin.GeometryMod
                 raise NearoptError(f"the visual {g.name!r} of {robot.name} cannot be drawn")
             vis[path].set_object(obj, _material(g.meshColor))
     return paths
+
+
+OBSTACLE_RGBA = (0.85, 0.55, 0.25, 0.75)
+HALFSPACE_RGBA = (0.55, 0.6, 0.65, 0.35)
+
+
+def draw_obstacles(vis: meshcat.Visualizer, scene: Scene, view: SceneView) -> None:
+    """Every obstacle under /meshcat/obstacles/<name>, in place (translucent orange; a
+    half-space as a translucent slab 1 cm thick whose top face is its boundary, as wide as the
+    floor grid)."""
+    for ob in scene.obstacles:
+        node = vis["obstacles"][ob.name]
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = ob.rotation(), ob.position
+        shape = ob.shape
+        if isinstance(shape, Box):
+            node.set_object(mg.Box(list(shape.size)), _material(OBSTACLE_RGBA))
+        elif isinstance(shape, Sphere):
+            node.set_object(mg.Sphere(shape.radius), _material(OBSTACLE_RGBA))
+        elif isinstance(shape, Cylinder | Capsule):  # meshcat's cylinders run along y
+            along_z = pin.utils.rotate("x", np.pi / 2)
+            body = node["body"]
+            body.set_object(mg.Cylinder(shape.length, shape.radius), _material(OBSTACLE_RGBA))
+            body.set_transform(pin.SE3(along_z, np.zeros(3)).homogeneous)
+            if isinstance(shape, Capsule):
+                for k, z in enumerate((-0.5 * shape.length, 0.5 * shape.length)):
+                    node[f"end{k}"].set_object(mg.Sphere(shape.radius), _material(OBSTACLE_RGBA))
+                    node[f"end{k}"].set_transform(pin.SE3(np.eye(3), np.array([0, 0, z]))
+                                                  .homogeneous)
+        elif isinstance(shape, HalfSpace):
+            n = np.asarray(shape.normal)
+            side = 3.0 * view.radius
+            thickness = 0.01
+            # the slab's z axis along n, its top face on n·x = d, centred under the motion
+            z = n
+            x = np.cross([0.0, 1.0, 0.0] if abs(n[1]) < 0.9 else [1.0, 0.0, 0.0], z)
+            x /= np.linalg.norm(x)
+            frame = np.column_stack([x, np.cross(z, x), z])
+            local = ob.rotation().T @ (view.centre - np.asarray(ob.position))  # in its frame
+            foot = local - (local @ n - shape.offset) * n - 0.5 * thickness * n
+            slab = np.eye(4)
+            slab[:3, :3], slab[:3, 3] = frame, foot
+            node["slab"].set_object(mg.Box([side, side, thickness]), _material(HALFSPACE_RGBA))
+            node["slab"].set_transform(slab)
+        elif isinstance(shape, Mesh):
+            for k, (vertices, faces, _) in enumerate(mesh_parts(str(shape.path),
+                                                                (shape.scale,) * 3)):
+                node[f"part{k}"].set_object(mg.TriangularMeshGeometry(vertices, faces),
+                                            _material(OBSTACLE_RGBA))
+        node.set_transform(pose)
 
 
 def _material(rgba: ArrayLike) -> mg.MeshPhongMaterial:
@@ -328,7 +383,8 @@ def mesh_parts(
 
 
 def scene_html(
-    robot: Robot, trajectory: Trajectory, initial: Trajectory | None = None, fps: float = 60.0
+    robot: Robot, trajectory: Trajectory, initial: Trajectory | None = None, fps: float = 60.0,
+    scene: Scene | None = None,
 ) -> str:
     """The animated scene of a motion as a standalone HTML page (no server, no network).
 
@@ -342,9 +398,11 @@ def scene_html(
         Another motion to show as a grey tip trail (e.g. the straight line's).
     fps
         Animation frames per second of motion time (it plays in real time).
+    scene
+        Obstacles to draw.
     """
     recorder = _Recorder()
-    _draw(meshcat.Visualizer(window=recorder), robot, trajectory, initial, fps)
+    _draw(meshcat.Visualizer(window=recorder), robot, trajectory, initial, fps, scene)
     return recorder.html()
 
 
@@ -360,8 +418,13 @@ def export_html(result: PlanResult, path: str | Path, fps: float = 60.0) -> Path
 
 
 def plan_html(result: PlanResult, fps: float = 60.0) -> str:
-    """:func:`scene_html` of a plan, with the straight line's tip trail."""
-    return scene_html(result.robot, result.trajectory, result.initial.trajectory, fps)
+    """:func:`scene_html` of a plan, with the first path's tip trail and the obstacles."""
+    return scene_html(result.robot, result.trajectory, result.initial.trajectory, fps,
+                      _scene_of(result))
+
+
+def _scene_of(result: PlanResult) -> Scene | None:
+    return None if result.collisions is None else result.collisions.scene
 
 
 class LiveViewer:
@@ -447,7 +510,8 @@ def show(result: PlanResult, fps: float = 60.0, open_browser: bool = False) -> L
     """
     viewer = LiveViewer()
     try:
-        _draw(viewer.visualizer, result.robot, result.trajectory, result.initial.trajectory, fps)
+        _draw(viewer.visualizer, result.robot, result.trajectory, result.initial.trajectory, fps,
+              _scene_of(result))
     except BaseException:
         viewer.close()
         raise
