@@ -186,6 +186,8 @@ class CollisionModel:
                     pairs.append((a, b))
         for a, b in pairs:
             geom.addCollisionPair(pin.CollisionPair(int(a), int(b)))
+        self.seconds = 0.0
+        """Time spent computing distances (all pairs at a configuration) so far [s]."""
         self._data = model.createData()
         self._gdata = pin.GeometryData(geom)
         self._configure()
@@ -203,8 +205,6 @@ class CollisionModel:
                 self._configure()
         self._pairs = np.array(pairs, dtype=int).reshape(-1, 2)
         self.pairs = tuple(Pair(self._names[a], self._names[b]) for a, b in self._pairs)
-        self.seconds = 0.0
-        """Time spent computing distances (all pairs at a configuration) so far [s]."""
         self.motion_rates = self._motion_rates()
         """R_j of every pair: how fast its distance can change per unit of θ'_j [m/rad or
         m/m], shape (len(pairs), n) (see the module docstring)."""
