@@ -145,7 +145,7 @@ def sequential_convex(
 
     p = start.control_points[1:-1].ravel()
     timing = time_it(p)
-    evaluations, index, small = 1, 0, 0
+    evaluations, index, small, failures = 1, 0, 0, 0
     accept(Iteration(0, timing.objective, None, timing.duration,
                      time.perf_counter() - t_start, start), timing)
     basis = None
@@ -164,9 +164,14 @@ def sequential_convex(
             model = _with_rows(model, *collision_rows(collisions, path_of(p), radius * scale[:n]))
         j0 = timing.objective
         step = _solve_model(disc, weights, model, p, radius * scale, lower, upper)
-        if step is None:
+        if step is None:  # numerical trouble: a smaller step is a better-conditioned model
+            failures += 1
+            radius *= 0.25
+            if failures < 3 and radius >= options.min_trust_radius:
+                continue
             reason, message = StopReason.SOLVER, "the convex model could not be solved"
             break
+        failures = 0
         dp, predicted, z_model = step
         if j0 - predicted <= options.tolerance * abs(j0):
             reason = StopReason.CONVERGED
@@ -208,9 +213,18 @@ def sequential_convex(
                        "joints' scale lowers J")
             break
     if iterate_grid < grid:  # the returned path on the plan's own grid
-        timing = time_it(p, on=grid)
-        evaluations += 1
+        try:
+            timing = time_it(p, on=grid)
+            evaluations += 1
+        except (InfeasiblePathError, SolverError) as exc:  # keep the iterate's own timing
+            message += (f"; timed on the iterate grid ({iterate_grid} segments): on the plan's "
+                        f"grid stage 1 failed ({exc})")
     return MethodOutcome(timing, reason, message, evaluations)
+
+
+ACTIVATION = 0.05
+"""Pairs farther than the margin plus this from each other get no row in the model [m]
+(TrajOpt's distance-check threshold)."""
 
 
 def collision_rows(
@@ -223,7 +237,8 @@ def collision_rows(
 
     m⁺ = margin + max(¼ margin, 1 mm) at the checked points, so that the certified check between
     them (at the margin itself) has room; the current path (Δc = 0) always satisfies them. Only
-    pairs whose distance the step (|Δθ_i| ≤ ``reach_i``) could bring to m⁺ are kept.
+    pairs within :data:`ACTIVATION` of m⁺ whose distance the step (|Δθ_i| ≤ ``reach_i``) could
+    bring to m⁺ are kept, at their local minima along σ and the checks beside them.
 
     Returns
     -------
@@ -235,7 +250,9 @@ def collision_rows(
     q = path(sigma)
     basis = path.basis(sigma)[:, 1:-1]  # (S, K)
     dist = np.array([collisions.distances(x) for x in q])  # (S, P)
-    moved = collisions.motion_rates @ reach  # (P,): how far the step can move each pair
+    # how far the step can move each pair, at most ACTIVATION: farther pairs wait for the next
+    # iterate (a step that brings one into contact fails the certificate and is rejected)
+    moved = np.minimum(collisions.motion_rates @ reach, ACTIVATION)
     # rows where a pair could reach m⁺: at its local minima along σ and their neighbours (the
     # minimum moves with the path), and wherever it is already within m⁺ + 5 mm
     low = np.zeros(dist.shape, dtype=bool)
