@@ -102,6 +102,31 @@ def test_planar_workspace_plot_is_in_the_arm_plane_with_the_tip_path(
     np.testing.assert_allclose(start[-1], [-0.4, 0.0], atol=1e-9)
 
 
+def test_a_planar_arm_s_workspace_shows_the_obstacles_sections(
+    paper_plan: nearopt.PlanResult,
+) -> None:
+    """A ball of radius 3 cm centred 1 cm off the arm's plane is cut in a disc of radius
+    √(3² − 1²) cm; a box crossing the plane in a rectangle; a floor as the region below it."""
+    from nearopt.collision import Box, HalfSpace, Obstacle, Scene, Sphere
+
+    scene = Scene((
+        Obstacle("ball", Sphere(0.03), (-0.14, 0.01, -0.1)),
+        Obstacle("block", Box((0.1, 0.2, 0.04)), (0.1, 0.0, -0.05)),
+        Obstacle("floor", HalfSpace((0.0, 0.0, 1.0), -0.15)),
+        Obstacle("away", Sphere(0.03), (0.0, 0.5, 0.0)),  # does not cross the plane
+    ))
+    fig = plot_workspace(paper_plan.robot, {"final": paper_plan.trajectory}, scene=scene)
+    ax = fig.axes[0]
+    assert len(ax.patches) == 3  # the one away from the plane is not drawn
+    assert [t.get_text() for t in ax.texts[:3]] == ["ball", "block", "floor"]
+    ball, block, floor = (p.get_xy() for p in ax.patches[:3])
+    radius = np.linalg.norm(ball - [-0.14, -0.1], axis=1)
+    np.testing.assert_allclose(radius, np.sqrt(0.03**2 - 0.01**2), rtol=0.02)
+    np.testing.assert_allclose([block[:, 0].min(), block[:, 0].max(), block[:, 1].min(),
+                                block[:, 1].max()], [0.05, 0.15, -0.07, -0.03], atol=1e-9)
+    assert floor[:, 1].max() == pytest.approx(-0.15, abs=1e-9)
+
+
 def test_spatial_arm_gets_a_3d_workspace_plot() -> None:
     robot = load("ur5")
     traj = nearopt.optimal_timing(robot, nearopt.StraightPath(np.zeros(6), np.full(6, 0.5)),

@@ -27,6 +27,7 @@ if TYPE_CHECKING:
     from matplotlib.figure import Figure
     from numpy.typing import NDArray
 
+    from ..collision import Scene
     from ..planning import PlanResult
     from ..robot import Robot
     from ..trajectory import Trajectory
@@ -152,7 +153,7 @@ def plot_accelerations(robot: Robot, trajectory: Trajectory, rate: float = 2000.
 
 
 def plot_workspace(
-    robot: Robot, motions: dict[str, Trajectory], poses: int = 5
+    robot: Robot, motions: dict[str, Trajectory], poses: int = 5, scene: Scene | None = None
 ) -> Figure:
     """The tip's path and ``poses`` link poses of each motion in the workspace (Figs. 3-5).
 
@@ -168,6 +169,8 @@ def plot_workspace(
         Label → motion, e.g. ``{"initial": …, "final": …}``; one panel each.
     poses
         Link poses drawn per motion, evenly spaced in time.
+    scene
+        Obstacles: a planar arm's panels show their sections by its plane (orange).
     """
     plt = _pyplot()
     tips = {label: tip_path(robot, traj) for label, traj in motions.items()}
@@ -202,6 +205,14 @@ def plot_workspace(
             ax.set_xlabel("x [m]")
             ax.set_ylabel("y [m]")
             ax.set_zlabel("z [m]")
+        if plane is not None and scene is not None:
+            origin = everything.mean(axis=0)
+            for name, polygon in obstacle_sections(scene, origin, plane, half):
+                ax.fill(*polygon.T, color="C1", alpha=0.45, linewidth=0)
+                ax.text(*polygon.mean(axis=0), name, fontsize=7, ha="center", color="C1",
+                        clip_on=True)
+            ax.set_xlim(flat(centre)[0] - half, flat(centre)[0] + half)
+            ax.set_ylim(flat(centre)[1] - half, flat(centre)[1] + half)
         for chain, shade, t in zip(frames[label], shades, times[label], strict=True):
             pts = flat(chain)
             ax.plot(*pts.T, "-o", color=str(shade), linewidth=1.5, markersize=3)
@@ -215,6 +226,59 @@ def plot_workspace(
     fig.suptitle(f"{robot.name}: tip path and link poses (light: early, dark: late)")
     fig.tight_layout()
     return fig
+
+
+def obstacle_sections(
+    scene: Scene, origin: NDArray[np.float64], plane: NDArray[np.float64], extent: float
+) -> list[tuple[str, NDArray[np.float64]]]:
+    """Each obstacle's section by the plane through ``origin`` spanned by ``plane`` (right,
+    up), as a polygon in the coordinates (x·right, x·up) [m] (those that cross the plane only);
+    a half-space is clipped to a square of half-side 4 ``extent`` around ``origin``."""
+    import trimesh
+
+    from ..collision.scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Sphere
+
+    normal = np.cross(plane[0], plane[1])
+    out = []
+    for ob in scene.obstacles:
+        shape = ob.shape
+        if isinstance(shape, Box):
+            mesh = trimesh.creation.box(shape.size)
+        elif isinstance(shape, Sphere):
+            mesh = trimesh.creation.icosphere(3, shape.radius)
+        elif isinstance(shape, Cylinder):
+            mesh = trimesh.creation.cylinder(shape.radius, shape.length, sections=48)
+        elif isinstance(shape, Capsule):
+            mesh = trimesh.creation.capsule(shape.length, shape.radius, count=(24, 24))
+        elif isinstance(shape, Mesh):
+            mesh = trimesh.load_mesh(shape.path, force="mesh").convex_hull
+            mesh.apply_scale(shape.scale)
+        elif isinstance(shape, HalfSpace):  # a big square of the plane, cut by the half-space
+            side = 4.0 * extent
+            corners = origin + side * np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) @ plane
+            mesh = trimesh.Trimesh(corners, [[0, 1, 2], [0, 2, 3]])
+            n = ob.rotation() @ np.asarray(shape.normal)
+            d = shape.offset + n @ np.asarray(ob.position)
+            sliced = trimesh.intersections.slice_mesh_plane(mesh, -n, n * d)
+            if len(sliced.vertices):
+                points = sliced.vertices @ plane.T
+                out.append((ob.name, _hull(points)))
+            continue
+        else:
+            continue
+        pose = np.eye(4)
+        pose[:3, :3], pose[:3, 3] = ob.rotation(), ob.position
+        mesh.apply_transform(pose)
+        lines = trimesh.intersections.mesh_plane(mesh, normal, origin)
+        if len(lines):
+            out.append((ob.name, _hull(lines.reshape(-1, 3) @ plane.T)))
+    return out
+
+
+def _hull(points: NDArray[np.float64]) -> NDArray[np.float64]:
+    from scipy.spatial import ConvexHull
+
+    return points[ConvexHull(points).vertices]
 
 
 def plot_history(
@@ -264,7 +328,8 @@ def render_figures(
     if np.any(np.isfinite(robot.limits.acceleration)):
         figures["accelerations.png"] = plot_accelerations(robot, traj)
     figures["workspace.png"] = plot_workspace(
-        robot, {"initial": result.initial.trajectory, "final": traj}
+        robot, {"initial": result.initial.trajectory, "final": traj},
+        scene=None if result.collisions is None else result.collisions.scene,
     )
     figures["history.png"] = plot_history(result, reference)
     rendered = {}
