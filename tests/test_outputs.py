@@ -16,6 +16,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
+import nearopt
+
 STAGE1 = ["plan", "--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--stage1-only"]
 ROOT = os.geteuid() == 0
 NOBODY = 65534
@@ -109,7 +111,10 @@ def test_a_replaced_file_keeps_its_mode_and_a_failure_keeps_the_old_one(tmp_path
 
 def run_as_nobody(*args: str) -> tuple[int, str]:
     """The CLI's ``main`` in a forked child that has dropped root for the unprivileged user
-    (the interpreter is already loaded, wherever it is installed); its exit code and stderr."""
+    (the interpreter and nearopt are loaded before, so the checkout may live in a folder that
+    user cannot read, such as mktemp's); its exit code and stderr."""
+    from nearopt.cli import main
+
     read, write = os.pipe()
     pid = os.fork()
     if pid == 0:  # child
@@ -120,7 +125,6 @@ def run_as_nobody(*args: str) -> tuple[int, str]:
             os.setgroups([])
             os.setgid(NOBODY)
             os.setuid(NOBODY)
-            from nearopt.cli import main
             code = main(list(args))
         except SystemExit as exc:
             code = exc.code if isinstance(exc.code, int) else 3
@@ -142,13 +146,18 @@ def test_an_unprivileged_user_is_told_and_nothing_is_written() -> None:
         folder.chmod(0o755)
         (folder / "theirs.json").write_text("root's")
         (folder / "theirs.json").chmod(0o644)
+        # the arm from a file that user can read, wherever the checkout is
+        urdf = folder / "two_link.urdf"
+        urdf.write_text(nearopt.Robot.from_name("two_link").urdf_path.read_text())
+        urdf.chmod(0o644)
+        request = ["plan", "--urdf", str(urdf), *STAGE1[3:]]
         for target, says in ((folder / "new.json", "Permission denied"),
                              (folder / "theirs.json", "permission denied")):
-            code, stderr = run_as_nobody(*STAGE1, "--json", str(target))
+            code, stderr = run_as_nobody(*request, "--json", str(target))
             lines = stderr.strip().splitlines()
             assert code == 2 and len(lines) == 1, stderr
             assert lines[0].startswith("nearopt: error: ") and says in lines[0], stderr
-        assert sorted(p.name for p in folder.iterdir()) == ["theirs.json"]
+        assert sorted(p.name for p in folder.iterdir()) == ["theirs.json", "two_link.urdf"]
         assert (folder / "theirs.json").read_text() == "root's"
 
 
