@@ -80,11 +80,14 @@ class Contact:
     points
         The nearest points on the first and on the second body, in the base frame [m],
         shape (2, 3).
+    index
+        The pair's index in :attr:`CollisionModel.pairs` (−1 when nothing is checked).
     """
 
     pair: Pair
     distance: float
     points: NDArray[np.float64]
+    index: int = -1
 
 
 @dataclass(frozen=True)
@@ -226,7 +229,7 @@ class CollisionModel:
         k = int(np.argmin(d))
         r = self._gdata.distanceResults[k]
         return Contact(self.pairs[k], float(d[k]),
-                       np.array([r.getNearestPoint1(), r.getNearestPoint2()]))
+                       np.array([r.getNearestPoint1(), r.getNearestPoint2()]), k)
 
     def check_configuration(self, q: ArrayLike, what: str = "configuration") -> None:
         """Raise a :class:`CollisionError` if a checked pair at θ is closer than the margin."""
@@ -312,7 +315,7 @@ class CollisionModel:
             self._all(at)
             r = self._gdata.distanceResults[int(k)]
             return Contact(self.pairs[k], d, np.array([r.getNearestPoint1(),
-                                                       r.getNearestPoint2()]))
+                                                       r.getNearestPoint2()]), int(k))
 
         worst = (float(dist[k_min]), float(s[k_min[0]]), int(k_min[1]))
         if worst[0] < level:
