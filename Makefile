@@ -40,6 +40,7 @@ bench: setup
 	$(BIN)/python scripts/bench_dynamics.py
 	$(BIN)/python scripts/bench_timing.py
 	$(BIN)/python scripts/bench_planner.py
+	$(BIN)/python scripts/bench_cell.py
 
 clean:
 	rm -rf $(VENV) out .pytest_cache
