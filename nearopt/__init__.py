@@ -18,8 +18,10 @@ from .errors import (
     SamplingWarning,
     SceneError,
     SolverError,
+    UnreachablePoseError,
     URDFError,
 )
+from .kinematics import ToolPose, inverse_kinematics
 from .path import BSplinePath, Path, SplinePath, StraightPath
 from .planning import (
     Iteration,
@@ -65,6 +67,8 @@ __all__ = [
     "Scene",
     "Obstacle",
     "CollisionModel",
+    "ToolPose",
+    "inverse_kinematics",
     "NearoptError",
     "URDFError",
     "RobotNotFoundError",
@@ -73,6 +77,7 @@ __all__ = [
     "SolverError",
     "CollisionError",
     "SceneError",
+    "UnreachablePoseError",
     "SamplingWarning",
 ]
 

@@ -31,6 +31,7 @@ from .collision import Scene
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .export import csv_text, json_text
+from .kinematics import ToolPose
 from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
 from .path import StraightPath
 from .planning import METHODS, Iteration, StopReason, plan
@@ -84,7 +85,12 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--velocity-scale", type=float, metavar="F",
                    help="multiply every joint speed limit by F")
     p.add_argument("--q0", nargs="+", type=float, required=True, metavar="V", help="start")
-    p.add_argument("--qe", nargs="+", type=float, required=True, metavar="V", help="goal")
+    p.add_argument("--qe", nargs="+", type=float, metavar="V", help="goal")
+    p.add_argument("--goal-pose", nargs="+", type=float, metavar="X",
+                   help="goal as a tool pose instead of --qe: x y z [m] (position only) or "
+                        "x y z qx qy qz qw (base frame), reached by inverse kinematics")
+    p.add_argument("--frame", metavar="NAME",
+                   help="the frame --goal-pose places (default: the robot's tip)")
     p.add_argument("--deg", action="store_true", help="q0 and qe are in degrees (default rad)")
     cost = p.add_mutually_exclusive_group()
     cost.add_argument("--beta", type=float, help="f0 = 1 + β Σ u² (the paper's eq. 32)")
@@ -171,6 +177,14 @@ def _check_request(args: argparse.Namespace) -> None:
             )
     if args.base and not args.tip:
         raise ConfigurationError("--base needs --tip: the chain goes from the base to the tip")
+    if (args.qe is None) == (args.goal_pose is None):
+        raise ConfigurationError("give the goal as --qe (joint values) or as --goal-pose, once")
+    if args.goal_pose is not None and len(args.goal_pose) not in (3, 7):
+        raise ConfigurationError(
+            f"--goal-pose takes x y z [m] or x y z qx qy qz qw, got {len(args.goal_pose)} numbers"
+        )
+    if args.frame and args.goal_pose is None:
+        raise ConfigurationError("--frame applies to --goal-pose")
     if args.group and not args.urdf:
         raise ConfigurationError("--group applies to --urdf (a named robot chooses its own joints)")
     if args.group and not args.srdf:
@@ -248,7 +262,12 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
             f"--weights needs one weight per joint of {robot.name} ({robot.n}), "
             f"got {len(args.weights)}"
         )
-    q0, qe = (np.deg2rad(v) if args.deg else np.asarray(v) for v in (args.q0, args.qe))
+    q0 = np.deg2rad(args.q0) if args.deg else np.asarray(args.q0)
+    if args.goal_pose is not None:
+        qe = ToolPose(args.goal_pose[:3], args.goal_pose[3:] or None, args.frame)
+        robot.frame_id(args.frame)  # an unknown frame is named before any work
+    else:
+        qe = np.deg2rad(args.qe) if args.deg else np.asarray(args.qe)
     scene = Scene.from_file(args.scene) if args.scene else None
 
     def progress(entry: Iteration) -> None:
@@ -284,7 +303,8 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
         )
     # verified at the controller's rate, and never more coarsely than at 1 kHz
     report = verify(
-        result.trajectory, robot, rate=max(args.rate, 1000.0), q0=q0, qe=qe, cost=result.cost,
+        result.trajectory, robot, rate=max(args.rate, 1000.0), q0=q0,
+        qe=None if isinstance(qe, ToolPose) else qe, goal_pose=result.goal, cost=result.cost,
         J=result.J, velocity_limits=not args.no_velocity_limits,
         position_limits=not args.no_position_limits, collisions=result.collisions,
     )

@@ -13,6 +13,7 @@ __all__ = [
     "RobotNotFoundError",
     "SceneError",
     "CollisionError",
+    "UnreachablePoseError",
     "ConfigurationError",
     "InfeasiblePathError",
     "SolverError",
@@ -168,6 +169,23 @@ class CollisionError(NearoptError):
         super().__init__(message)
         self.pair = pair
         self.distance = distance
+
+
+class UnreachablePoseError(NearoptError):
+    """A tool pose no configuration within the joint limits reaches.
+
+    Parameters
+    ----------
+    message
+        The target and how far the closest placement found is from it.
+    distance, angle
+        That distance [m] and angle [rad].
+    """
+
+    def __init__(self, message: str, *, distance: float, angle: float) -> None:
+        super().__init__(message)
+        self.distance = distance
+        self.angle = angle
 
 
 class SamplingWarning(UserWarning):

@@ -592,6 +592,23 @@ class Robot:
         return du_dq, du_dv, h
 
     # ------------------------------------------------------------------ kinematics
+    def frame_id(self, frame: str | None = None) -> int:
+        """Pinocchio's id of a frame by name (default: the tip).
+
+        Raises
+        ------
+        ConfigurationError
+            For an unknown frame; the message lists the robot's link frames.
+        """
+        return self._tip_id if frame is None else _frame_id(self._model, frame, self.name)
+
+    def frame_placement(self, q: ArrayLike, frame: str | None = None) -> pin.SE3:
+        """Placement of a frame (default: the tip) in the base frame at θ, shape (n,)."""
+        q = self.check_configuration(q)
+        fid = self.frame_id(frame)
+        pin.framesForwardKinematics(self._model, self._data, q)
+        return pin.SE3(self._data.oMf[fid])
+
     def frame_position(self, q: ArrayLike, frame: str | None = None) -> NDArray[np.float64]:
         """World position of a frame (default: the tip) [m]; q of shape (n,) or (N, n)."""
         q = np.asarray(q, dtype=float)
@@ -763,7 +780,9 @@ def _frame_id(model: pin.Model, frame: str, robot: str) -> int:
             return model.getFrameId(frame, ftype)
     if model.existFrame(frame):
         return model.getFrameId(frame)
-    raise ConfigurationError(f"robot {robot!r} has no frame {frame!r}")
+    links = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
+    raise ConfigurationError(f"robot {robot!r} has no frame {frame!r}; its links: "
+                             f"{', '.join(links)}")
 
 
 def _default_tip(model: pin.Model) -> str:

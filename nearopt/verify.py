@@ -23,6 +23,7 @@ if TYPE_CHECKING:
 
     from .collision import CollisionModel
     from .cost import Cost
+    from .kinematics import ToolPose
     from .robot import Robot
     from .trajectory import Trajectory
 
@@ -141,6 +142,7 @@ def verify(
     window: float = 0.25,
     simulate: bool = True,
     collisions: CollisionModel | None = None,
+    goal_pose: ToolPose | None = None,
 ) -> VerificationReport:
     """Check a motion at a controller rate, from the robot model alone.
 
@@ -182,6 +184,9 @@ def verify(
     simulate
         Run the forward simulation (the slowest check); without it, the report holds the checks
         of the samples only.
+    goal_pose
+        Check that the last sample puts the goal's frame at its placement, to ``end_tolerance``
+        [m and rad].
     collisions
         Check the signed distance of every pair of this model at every sample against its margin
         (the report gives the closest pair, its distance and when) [m].
@@ -227,6 +232,13 @@ def verify(
     k, i = np.unravel_index(np.argmax(ends), ends.shape)
     checks.append(Check("end positions", float(ends[k, i]), end_tolerance, "rad",
                         f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}"))
+    if goal_pose is not None:
+        from .kinematics import pose_error
+
+        distance, angle = pose_error(robot, q[-1], goal_pose)
+        checks.append(Check("goal pose", max(distance, angle), end_tolerance, "m or rad",
+                            f"{goal_pose.frame or robot.tip!r}: {distance:.2e} m, {angle:.2e} rad "
+                            "from the target at t = te"))
     rest = np.abs(qd[[0, -1]])
     k, i = np.unravel_index(np.argmax(rest), rest.shape)
     checks.append(Check("rest at both ends", float(rest[k, i]), end_tolerance, "rad/s",

@@ -28,6 +28,7 @@ from ..collision import Clearance, CollisionModel, Scene
 from ..collision.sampling import collision_free_path
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import ConfigurationError, InfeasiblePathError, SolverError
+from ..kinematics import ToolPose, inverse_kinematics
 from ..path import BSplinePath, Path, StraightPath
 from ..robot import Robot
 from ..timing import MAX_GRID, TimingResult, optimal_timing
@@ -55,7 +56,7 @@ SCREENING = 6  # stage-2 iterations from each OMPL path before the best is conti
 def plan(
     robot: Robot,
     q0: ArrayLike,
-    qe: ArrayLike,
+    qe: ArrayLike | ToolPose,
     cost: Cost | None = None,
     *,
     method: Method | str | None = None,
@@ -79,7 +80,9 @@ def plan(
         The arm; its torque (and by default speed and position, and any acceleration) limits are
         enforced.
     q0, qe
-        Start and goal configurations θ0, θe [rad or m], shape (n,).
+        Start and goal configurations θ0, θe [rad or m], shape (n,); the goal may be a
+        :class:`~nearopt.ToolPose` (a placement of a frame), reached by inverse kinematics from
+        θ0 within the position limits (:func:`~nearopt.kinematics.inverse_kinematics`).
     cost
         The running cost f0 (default: :class:`~nearopt.TimeCost`). ``"scp"`` needs a
         :class:`~nearopt.TorqueCost` (time, the paper's eq. 32, per-joint weights).
@@ -123,6 +126,9 @@ def plan(
         On a bad argument (wrong length, NaN, outside the position limits, unknown method, …).
     InfeasiblePathError
         If the straight line itself cannot be timed (gravity exceeds a limit along it).
+    UnreachablePoseError
+        If no configuration within the limits puts the frame at a goal pose (the message says
+        how far the closest is, in metres and radians).
     CollisionError
         If the start or the goal is closer than the margin (naming the pair and the distance),
         or no collision-free path was found within the time limit.
@@ -149,6 +155,9 @@ def plan(
             f"time_limit must be a positive number of seconds, got {time_limit}"
         )
     q0 = robot.check_configuration(q0, "q0")
+    goal = qe if isinstance(qe, ToolPose) else None
+    if goal is not None:  # inverse kinematics from the start, within the position limits
+        qe = inverse_kinematics(robot, goal, seed=q0)
     qe = robot.check_configuration(qe, "qe")
     if position_limits:
         _check_within(robot, q0, "q0")
@@ -255,6 +264,7 @@ def plan(
         wall_time=time.perf_counter() - t_start,
         collisions=collisions,
         clearance=None if collisions is None else _certify(collisions, timing.trajectory.path),
+        goal=goal,
     )
 
 

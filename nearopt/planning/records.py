@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Literal
 if TYPE_CHECKING:
     from ..collision import Clearance, CollisionModel
     from ..cost import Cost
+    from ..kinematics import ToolPose
     from ..path import Path
     from ..robot import Robot
     from ..timing import TimingResult
@@ -199,6 +200,8 @@ class PlanResult:
         The bodies kept apart and the margin, when collisions were checked.
     clearance
         The certified clearance of the returned path (the closest pair, where), when checked.
+    goal
+        The tool pose the goal configuration was found for, when the goal was one.
     """
 
     robot: Robot
@@ -212,6 +215,7 @@ class PlanResult:
     wall_time: float
     collisions: CollisionModel | None = None
     clearance: Clearance | None = None
+    goal: ToolPose | None = None
 
     @property
     def trajectory(self) -> Trajectory:

@@ -1,0 +1,172 @@
+"""Goals given as tool poses: a placement of a robot frame, reached by inverse kinematics inside
+the joint limits.
+
+The target is a position p* [m] and optionally an orientation (unit quaternion qx, qy, qz, qw, in
+the base frame). :func:`inverse_kinematics` runs damped least squares (Levenberg-Marquardt) on the
+placement error e = log₆(M(θ)⁻¹ M*) (or p* − p(θ) for a position only) with Pinocchio's frame
+Jacobian, θ projected onto the position limits after every step, from the seed and then from
+seeded random configurations, until |e| ≤ 1e-10 (m and rad).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+import pinocchio as pin
+
+from .errors import ConfigurationError, UnreachablePoseError
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, NDArray
+
+    from .robot import Robot
+
+__all__ = ["ToolPose", "inverse_kinematics", "pose_error"]
+
+
+@dataclass(frozen=True)
+class ToolPose:
+    """A target placement of a frame of the robot.
+
+    Attributes
+    ----------
+    position
+        The frame's origin in the base frame [m], shape (3,).
+    quaternion
+        Its orientation (qx, qy, qz, qw), normalised on construction; None: position only.
+    frame
+        The frame (a link or any frame of the URDF); None: the robot's tip.
+    """
+
+    position: tuple[float, float, float]
+    quaternion: tuple[float, float, float, float] | None = None
+    frame: str | None = None
+
+    def __post_init__(self) -> None:
+        p = np.asarray(self.position, dtype=float)
+        if p.shape != (3,) or not np.all(np.isfinite(p)):
+            raise ConfigurationError(f"a tool position is 3 finite numbers [m], got "
+                                     f"{self.position!r}")
+        object.__setattr__(self, "position", tuple(float(x) for x in p))
+        if self.quaternion is not None:
+            q = np.asarray(self.quaternion, dtype=float)
+            if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-9:
+                raise ConfigurationError(
+                    f"a tool orientation is a non-zero quaternion (qx, qy, qz, qw), got "
+                    f"{self.quaternion!r}"
+                )
+            object.__setattr__(self, "quaternion", tuple(float(x) for x in q / np.linalg.norm(q)))
+
+    def placement(self) -> pin.SE3:
+        """The target as a Pinocchio placement (identity rotation for a position only)."""
+        rotation = np.eye(3)
+        if self.quaternion is not None:
+            qx, qy, qz, qw = self.quaternion
+            rotation = pin.Quaternion(qw, qx, qy, qz).toRotationMatrix()
+        return pin.SE3(rotation, np.asarray(self.position))
+
+
+def pose_error(robot: Robot, q: ArrayLike, pose: ToolPose) -> tuple[float, float]:
+    """Distance [m] and angle [rad] between the frame at θ and the target (angle 0 for a
+    position-only target)."""
+    placement = robot.frame_placement(q, pose.frame)
+    target = pose.placement()
+    distance = float(np.linalg.norm(placement.translation - target.translation))
+    if pose.quaternion is None:
+        return distance, 0.0
+    angle = float(np.linalg.norm(pin.log3(placement.rotation.T @ target.rotation)))
+    return distance, angle
+
+
+def inverse_kinematics(
+    robot: Robot,
+    pose: ToolPose,
+    *,
+    seed: ArrayLike | None = None,
+    attempts: int = 30,
+    iterations: int = 200,
+    tolerance: float = 1e-10,
+) -> NDArray[np.float64]:
+    """A configuration θ within the position limits that puts ``pose.frame`` at the target.
+
+    Parameters
+    ----------
+    robot
+        The arm.
+    pose
+        The target.
+    seed
+        First guess [rad or m], shape (n,) (e.g. the motion's start); later attempts start from
+        configurations drawn uniformly within the limits (seeded: the result is reproducible).
+    attempts
+        Starts tried.
+    iterations
+        Damped least-squares steps per start.
+    tolerance
+        Accepted |e| [m and rad] (the target is met to it).
+
+    Raises
+    ------
+    UnreachablePoseError
+        When no start converges: the message gives how far the best placement found is from the
+        target, in metres and radians.
+    ConfigurationError
+        An unknown frame (the message lists the frames).
+    """
+    model, data = robot.model, robot.model.createData()
+    fid = robot.frame_id(pose.frame)
+    lim = robot.limits
+    lower = np.where(np.isfinite(lim.position_lower), lim.position_lower, -np.pi)
+    upper = np.where(np.isfinite(lim.position_upper), lim.position_upper, np.pi)
+    rng = np.random.default_rng(20261123)
+    target = pose.placement()
+    full = pose.quaternion is not None
+    starts = [] if seed is None else [robot.check_configuration(seed, "seed")]
+    best: tuple[float, NDArray[np.float64]] | None = None
+    for k in range(attempts):
+        q = np.clip(starts[k] if k < len(starts) else rng.uniform(lower, upper),
+                    lim.position_lower, lim.position_upper)
+        damping = 1e-3
+        for _ in range(iterations):
+            err, jac = _error(model, data, fid, q, target, full)
+            norm = float(np.linalg.norm(err))
+            if best is None or norm < best[0]:
+                best = (norm, q.copy())
+            if norm <= tolerance:
+                return q
+            step = np.linalg.solve(jac.T @ jac + damping * np.eye(robot.n), jac.T @ err)
+            trial = np.clip(q + step, lim.position_lower, lim.position_upper)
+            if np.linalg.norm(_error(model, data, fid, trial, target, full)[0]) < norm:
+                q, damping = trial, max(damping / 3.0, 1e-9)
+            else:
+                damping *= 10.0
+                if damping > 1e6:
+                    break
+    assert best is not None
+    distance, angle = pose_error(robot, best[1], pose)
+    where = f"{pose.frame or robot.tip!r}"
+    raise UnreachablePoseError(
+        f"{robot.name} cannot put {where} at {list(pose.position)}"
+        + (f" with orientation {list(pose.quaternion)}" if full else "")
+        + f" within its joint limits: the closest placement found is {distance:.4g} m"
+        + (f" and {angle:.4g} rad" if full else "") + " away",
+        distance=distance, angle=angle,
+    )
+
+
+def _error(
+    model: pin.Model, data: pin.Data, fid: int, q: NDArray[np.float64], target: pin.SE3,
+    full: bool,
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The placement error e and de/dθ (so that θ + Δθ with J Δθ = e reduces it)."""
+    pin.computeJointJacobians(model, data, q)
+    pin.updateFramePlacements(model, data)
+    current = data.oMf[fid]
+    if not full:
+        jac = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
+        return target.translation - current.translation, jac
+    error = current.actInv(target)  # M⁻¹ M*
+    jac = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL)
+    return pin.log6(error).vector, pin.Jlog6(error.inverse()) @ jac

@@ -1,0 +1,131 @@
+"""Goals given as tool poses (#12, first part): inverse kinematics within the limits, plans that
+end at the pose (checked by forward kinematics on the written samples), and the errors."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from checks import assert_independent_checks
+from conftest import load, random_configuration
+
+import nearopt
+from nearopt import ToolPose, UnreachablePoseError, inverse_kinematics
+from nearopt.kinematics import pose_error
+
+
+def pose_of(robot: nearopt.Robot, q: np.ndarray, frame: str | None = None) -> ToolPose:
+    """The placement of a frame at θ as a ToolPose (Pinocchio directly)."""
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q)
+    m = data.oMf[robot.frame_id(frame)]
+    quat = pin.Quaternion(m.rotation)
+    return ToolPose(m.translation, (quat.x, quat.y, quat.z, quat.w), frame)
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda", "xarm7", "kinova"])
+def test_inverse_kinematics_reaches_poses_within_the_limits(name: str,
+                                                           rng: np.random.Generator) -> None:
+    robot = load(name)
+    lim = robot.limits
+    for _ in range(5):
+        pose = pose_of(robot, random_configuration(robot, rng))
+        q = inverse_kinematics(robot, pose, seed=random_configuration(robot, rng))
+        distance, angle = pose_error(robot, q, pose)
+        assert distance < 1e-9 and angle < 1e-9
+        assert np.all(q >= lim.position_lower) and np.all(q <= lim.position_upper)
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_a_plan_to_a_tool_pose_ends_there(name: str, rng: np.random.Generator,
+                                          tmp_path: Path) -> None:
+    """Through the CLI; the last sample of the JSON is checked by forward kinematics."""
+    robot = load(name)
+    q0 = random_configuration(robot, rng)
+    target = pose_of(robot, random_configuration(robot, rng))
+    out = tmp_path / "plan.json"
+    run = subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", name,
+         "--q0", *map(str, q0), "--goal-pose", *map(str, target.position),
+         *map(str, target.quaternion), "--time-optimal", "--grid", "100", "--quiet",
+         "--json", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    q = np.array(json.loads(out.read_text())["q"])
+    np.testing.assert_allclose(q[0], q0, atol=1e-12)
+    data = robot.model.createData()
+    pin.framesForwardKinematics(robot.model, data, q[-1])
+    m = data.oMf[robot.frame_id()]
+    assert np.linalg.norm(m.translation - target.position) < 1e-6
+    assert np.linalg.norm(pin.log3(m.rotation.T @ target.placement().rotation)) < 1e-6
+
+
+def test_a_position_only_goal_and_a_named_frame(rng: np.random.Generator) -> None:
+    robot = load("panda")
+    q0 = random_configuration(robot, rng)
+    spot = robot.frame_position(random_configuration(robot, rng), "panda_link7")
+    result = nearopt.plan(robot, q0, ToolPose(spot, frame="panda_link7"), grid=60,
+                          max_iterations=3)
+    end = result.trajectory(np.array([result.duration]), 0)[0]
+    assert np.linalg.norm(robot.frame_position(end, "panda_link7") - spot) < 1e-6
+    assert result.goal is not None and result.goal.frame == "panda_link7"
+    report = nearopt.verify(result.trajectory, robot, goal_pose=result.goal, simulate=False)
+    assert report.passed, report
+    assert_independent_checks(robot, result.trajectory, result.cost, result.J, q0, end)
+
+
+def test_an_unreachable_pose_says_how_far_it_is() -> None:
+    robot = load("ur5")
+    with pytest.raises(UnreachablePoseError, match=r"closest placement found is [\d.]+ m and "
+                                                   r"[\d.e-]+ rad away") as info:
+        nearopt.plan(robot, np.zeros(6), ToolPose((3.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0)))
+    # ur5 reaches about 0.95 m from its shoulder: the target is ≥ 1.9 m beyond
+    assert 1.9 < info.value.distance < 2.3
+
+
+def test_a_pose_reachable_only_outside_the_limits_is_refused() -> None:
+    """ur5 with its shoulder pan held to ±0.1 rad cannot reach a point low behind it (over its
+    shoulder it gets within a few centimetres)."""
+    base = load("ur5")
+    lower, upper = base.limits.position_lower.copy(), base.limits.position_upper.copy()
+    lower[0], upper[0] = -0.1, 0.1
+    robot = base.with_limits(position=(lower, upper))
+    behind = base.frame_position(np.array([np.pi, -1.2, 1.2, -1.5, -1.57, 0.0]))
+    inverse_kinematics(base, ToolPose(behind))  # reachable with the URDF's limits
+    with pytest.raises(UnreachablePoseError) as info:
+        inverse_kinematics(robot, ToolPose(behind))
+    assert info.value.distance > 0.01
+    assert f"{info.value.distance:.4g} m away" in str(info.value)
+
+
+def test_an_unknown_frame_lists_the_frames() -> None:
+    robot = load("ur5")
+    with pytest.raises(nearopt.ConfigurationError, match="no frame 'gripper'; its links: .*"
+                                                         "wrist_3_link"):
+        nearopt.plan(robot, np.zeros(6), ToolPose((0.4, 0.0, 0.4), frame="gripper"))
+    run = subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--q0", *["0"] * 6,
+         "--goal-pose", "0.4", "0", "0.4", "--frame", "gripper"],
+        capture_output=True, text=True, timeout=120,
+    )
+    lines = run.stderr.strip().splitlines()
+    assert run.returncode == 2 and len(lines) == 1 and "tool0" in lines[0], run.stderr
+
+
+@pytest.mark.parametrize("args", [
+    ["--qe", *["0.1"] * 6, "--goal-pose", "0.4", "0", "0.4"],
+    ["--goal-pose", "0.4", "0"],
+    ["--frame", "tool0", "--qe", *["0.1"] * 6],
+])
+def test_goal_options_that_do_not_go_together(args: list[str]) -> None:
+    run = subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--q0", *["0"] * 6,
+         *args], capture_output=True, text=True, timeout=120,
+    )
+    assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1, run.stderr
