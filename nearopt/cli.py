@@ -91,6 +91,9 @@ def _parser() -> argparse.ArgumentParser:
                         "x y z qx qy qz qw (base frame), reached by inverse kinematics")
     p.add_argument("--frame", metavar="NAME",
                    help="the frame --goal-pose places (default: the robot's tip)")
+    p.add_argument("--fixed-goal", action="store_true",
+                   help="keep inverse kinematics' goal configuration (by default it moves along "
+                        "the pose with the path, to lower J)")
     p.add_argument("--deg", action="store_true", help="q0 and qe are in degrees (default rad)")
     cost = p.add_mutually_exclusive_group()
     cost.add_argument("--beta", type=float, help="f0 = 1 + β Σ u² (the paper's eq. 32)")
@@ -183,8 +186,8 @@ def _check_request(args: argparse.Namespace) -> None:
         raise ConfigurationError(
             f"--goal-pose takes x y z [m] or x y z qx qy qz qw, got {len(args.goal_pose)} numbers"
         )
-    if args.frame and args.goal_pose is None:
-        raise ConfigurationError("--frame applies to --goal-pose")
+    if (args.frame or args.fixed_goal) and args.goal_pose is None:
+        raise ConfigurationError("--frame and --fixed-goal apply to --goal-pose")
     if args.group and not args.urdf:
         raise ConfigurationError("--group applies to --urdf (a named robot chooses its own joints)")
     if args.group and not args.srdf:
@@ -286,6 +289,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
             scene=scene,
             margin=args.margin,
             self_collision=args.self_collision,
+            optimise_goal=not args.fixed_goal,
         )
     first = "straight line" if isinstance(result.initial.trajectory.path, StraightPath) else (
         "first path, from OMPL")

@@ -23,7 +23,7 @@ if TYPE_CHECKING:
 
     from .robot import Robot
 
-__all__ = ["ToolPose", "inverse_kinematics", "pose_error"]
+__all__ = ["ToolPose", "inverse_kinematics", "pose_error", "task_jacobian"]
 
 
 @dataclass(frozen=True)
@@ -78,6 +78,18 @@ def pose_error(robot: Robot, q: ArrayLike, pose: ToolPose) -> tuple[float, float
         return distance, 0.0
     angle = float(np.linalg.norm(pin.log3(placement.rotation.T @ target.rotation)))
     return distance, angle
+
+
+def task_jacobian(robot: Robot, pose: ToolPose, q: ArrayLike) -> NDArray[np.float64]:
+    """The pose's frame Jacobian at θ: 6 × n in the frame (a full pose), 3 × n with world axes
+    (a position); a step Δθ in its null space keeps the frame at the pose to first order."""
+    model, data = robot.model, robot.model.createData()
+    fid = robot.frame_id(pose.frame)
+    pin.computeJointJacobians(model, data, robot.check_configuration(q))
+    pin.updateFramePlacements(model, data)
+    if pose.quaternion is None:
+        return pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
+    return pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL)
 
 
 def inverse_kinematics(

@@ -129,3 +129,25 @@ def test_goal_options_that_do_not_go_together(args: list[str]) -> None:
          *args], capture_output=True, text=True, timeout=120,
     )
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1, run.stderr
+
+
+def test_the_goal_configuration_is_optimised_along_the_pose(rng: np.random.Generator) -> None:
+    """panda is redundant: θe moves among the configurations that hold the pose. J never ends
+    above the plan with inverse kinematics' θe, and every iterate ends exactly at the pose."""
+    robot = load("panda")
+    cost = nearopt.TorqueCost(0.001)
+    gains = []
+    for _ in range(3):
+        q0 = random_configuration(robot, rng)
+        goal = pose_of(robot, random_configuration(robot, rng))
+        fixed = nearopt.plan(robot, q0, goal, cost, optimise_goal=False, time_limit=60.0)
+        moved = nearopt.plan(robot, q0, goal, cost, time_limit=60.0)
+        assert moved.J <= fixed.J * (1 + 1e-6)
+        gains.append(1 - moved.J / fixed.J)
+        for it in moved.history:
+            distance, angle = pose_error(robot, it.path(np.array([it.path.s_end]))[0], goal)
+            assert distance < 1e-9 and angle < 1e-9
+        report = nearopt.verify(moved.trajectory, robot, goal_pose=goal, cost=moved.cost,
+                                J=moved.J, simulate=False)
+        assert report.passed, report
+    assert max(gains) > 0.01  # the freedom is worth something on some of them

@@ -47,13 +47,15 @@ class PathBasis(NamedTuple):
     interior: NDArray[np.float64]
 
 
-def path_basis(path: BSplinePath, disc: Discretisation) -> PathBasis:
-    """The basis of a B-spline path's interior control points at a discretisation's rows."""
+def path_basis(path: BSplinePath, disc: Discretisation, end: bool = False) -> PathBasis:
+    """The basis of a B-spline path's interior control points (and of its end point, with
+    ``end``: a goal that moves) at a discretisation's rows."""
     sigma = disc.problem.sigma
-    knots = tuple(path.basis(sigma, order)[:, 1:-1] for order in (0, 1, 2))
+    cols = slice(1, None if end else -1)
+    knots = tuple(path.basis(sigma, order)[:, cols] for order in (0, 1, 2))
     inside = disc.problem.interior_speed
     at = np.zeros(0) if inside is None else inside.sigma
-    return PathBasis(knots, path.basis(at, 1)[:, 1:-1])  # type: ignore[arg-type]
+    return PathBasis(knots, path.basis(at, 1)[:, cols])  # type: ignore[arg-type]
 
 
 def row_path_jacobian(

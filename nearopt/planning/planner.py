@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -36,6 +37,7 @@ from .paper import paper_iterations
 from .records import (
     Iteration,
     Method,
+    MethodOutcome,
     PaperOptions,
     PlanResult,
     SCPOptions,
@@ -71,6 +73,7 @@ def plan(
     scene: Scene | CollisionModel | None = None,
     margin: float | None = None,
     self_collision: bool | None = None,
+    optimise_goal: bool = True,
 ) -> PlanResult:
     """Plan a near-optimum motion from rest at θ0 to rest at θe (Sections 4-6).
 
@@ -111,6 +114,11 @@ def plan(
     self_collision
         Keep the robot's links apart (default: when a scene is given; ``True`` without a scene
         checks self-collision only).
+    optimise_goal
+        With a :class:`~nearopt.ToolPose` goal and ``"scp"``: θe moves with the path among the
+        configurations that hold the pose (its step in the null space of the frame's Jacobian,
+        projected back by inverse kinematics), so a redundant arm ends where J is lowest;
+        False keeps inverse kinematics' θe.
 
     Returns
     -------
@@ -238,6 +246,10 @@ def plan(
             if method == Method.SCP:
                 outcome = sequential_convex(robot, q0, qe, cost, **common,
                                             collisions=collisions, start=start)
+                if goal is not None and optimise_goal and len(history) <= max_iterations:
+                    # then θe moves along the pose, from that plan: J can only go down
+                    outcome = _free_goal(robot, q0, qe, cost, goal, outcome, common, history,
+                                         collisions)
             else:
                 outcome = paper_iterations(robot, initial, cost, **common)
             timing, reason = outcome.timing, outcome.reason
@@ -266,6 +278,30 @@ def plan(
         clearance=None if collisions is None else _certify(collisions, timing.trajectory.path),
         goal=goal,
     )
+
+
+def _free_goal(
+    robot: Robot, q0: NDArray[np.float64], qe: NDArray[np.float64], cost: Cost, goal: ToolPose,
+    first: MethodOutcome, common: dict[str, object], history: list[Iteration],
+    collisions: CollisionModel | None,
+) -> MethodOutcome:
+    """Stage 2 continued from ``first`` with θe free along the goal pose; its iterates follow
+    the first run's in the history (its iterate 0, the same path, is not repeated)."""
+    accept = common["accept"]
+    offset = len(history) - 1
+
+    def follow(entry: Iteration, timing: TimingResult) -> None:
+        if entry.index > 0:
+            accept(replace(entry, index=entry.index + offset), timing)  # type: ignore[operator]
+
+    options = dict(common, accept=follow,
+                   max_iterations=int(common["max_iterations"]) - offset)  # type: ignore[call-overload]
+    second = sequential_convex(robot, q0, qe, cost, **options, collisions=collisions,
+                               start=first.timing.trajectory.path, goal=goal)
+    if second.timing.J > first.timing.J:  # e.g. re-timed on another grid: keep the first
+        return first
+    return MethodOutcome(second.timing, second.reason, second.message,
+                         first.evaluations + second.evaluations)
 
 
 def _screen(

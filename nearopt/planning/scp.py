@@ -41,7 +41,8 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..cost import TorqueCost
-from ..errors import InfeasiblePathError, SolverError
+from ..errors import InfeasiblePathError, SolverError, UnreachablePoseError
+from ..kinematics import ToolPose, inverse_kinematics, task_jacobian
 from ..path import BSplinePath
 from ..timing import Discretisation, LinearRows, is_solved, optimal_timing, solve_conic
 from .linearisation import path_basis, row_path_jacobian
@@ -74,6 +75,7 @@ def sequential_convex(
     accept: Callable[[Iteration, TimingResult], None],
     collisions: CollisionModel | None = None,
     start: BSplinePath | None = None,
+    goal: ToolPose | None = None,
 ) -> MethodOutcome:
     """Improve the path from the straight line by sequential convex programming.
 
@@ -107,6 +109,10 @@ def sequential_convex(
     start
         The first path (default: the straight line with ``options.control_points`` interior
         points); its control points and knots are those of every iterate.
+    goal
+        A tool pose the end θe must keep (to 1e-10 m and rad): θe then moves with the path, its
+        step in the null space of the frame's Jacobian and projected back onto the pose by
+        inverse kinematics; None: θe fixed.
     """
     weights = cost.torque_weights(robot.n) if isinstance(cost, TorqueCost) else None
     if weights is None:
@@ -127,14 +133,17 @@ def sequential_convex(
     # changes of θ' relative to each joint's scale (its motion, at least 10 % of its range and
     # 0.1 rad), where the linearisation's error grows
     scale = np.maximum.reduce([np.abs(qe - q0), 0.1 * _range(lim), np.full(n, 0.1)])
-    scale = np.tile(scale / (k_count - 1), k_count)
-    lower = np.tile(lim.position_lower, k_count) if position_limits else np.full(n * k_count,
-                                                                                 -np.inf)
-    upper = np.tile(lim.position_upper, k_count) if position_limits else np.full(n * k_count,
-                                                                                 np.inf)
+    moving = k_count + (goal is not None)  # the interior control points, and θe with a goal
+    scale = np.tile(scale / (k_count - 1), moving)
+    lower = np.tile(lim.position_lower, moving) if position_limits else np.full(n * moving,
+                                                                                -np.inf)
+    upper = np.tile(lim.position_upper, moving) if position_limits else np.full(n * moving,
+                                                                                np.inf)
 
     def path_of(p: NDArray[np.float64]) -> BSplinePath:
-        return BSplinePath(np.vstack([ends[:1], p.reshape(k_count, n), ends[1:]]), breaks)
+        end = ends[1:] if goal is None else p[-n:][None, :]
+        return BSplinePath(np.vstack([ends[:1], p[: k_count * n].reshape(k_count, n), end]),
+                           breaks)
 
     def time_it(
         p: NDArray[np.float64], like: TimingResult | None = None,
@@ -143,7 +152,7 @@ def sequential_convex(
         return optimal_timing(robot, path_of(p), cost, grid=on, velocity_limits=velocity_limits,
                               guess=guess, margins=None if like is None else like.problem)
 
-    p = start.control_points[1:-1].ravel()
+    p = start.control_points[1:-1 if goal is None else None].ravel()
     timing = time_it(p)
     evaluations, index, small, failures = 1, 0, 0, 0
     accept(Iteration(0, timing.objective, None, timing.duration,
@@ -158,10 +167,16 @@ def sequential_convex(
         disc = Discretisation(timing.problem)
         z = timing.b[1:-1]
         if basis is None:  # the grid (knots, interior points) is the same for every iterate
-            basis = path_basis(timing.trajectory.path, disc)
+            basis = path_basis(timing.trajectory.path, disc, end=goal is not None)
         model = _model(disc, z, row_path_jacobian(robot, disc, z, basis), radius * scale)
         if collisions is not None:
-            model = _with_rows(model, *collision_rows(collisions, path_of(p), radius * scale[:n]))
+            model = _with_rows(model, *collision_rows(collisions, path_of(p), radius * scale[:n],
+                                                       end=goal is not None))
+        if goal is not None:  # θe moves along the pose: J_task Δθe = 0
+            task = task_jacobian(robot, goal, p[-n:])
+            rows = sp.hstack([sp.csr_matrix((task.shape[0], p.size - n)), sp.csr_matrix(task)])
+            model = _with_rows(model, rows.tocsr(), np.zeros(task.shape[0]),
+                               np.zeros(task.shape[0]))
         j0 = timing.objective
         step = _solve_model(disc, weights, model, p, radius * scale, lower, upper)
         if step is None:  # numerical trouble: a smaller step is a better-conditioned model
@@ -179,9 +194,15 @@ def sequential_convex(
                        f"{options.tolerance:g} relative")
             break
         trial = None
-        if collisions is None or collisions.path_clearance(path_of(p + dp)).certified:
+        p_trial = p + dp
+        if goal is not None:  # back onto the pose (to first order the step never left it)
+            end = _onto(robot, goal, p_trial[-n:])
+            p_trial = None if end is None else np.concatenate([p_trial[:-n], end])
+        if p_trial is not None and (
+            collisions is None or collisions.path_clearance(path_of(p_trial)).certified
+        ):
             try:
-                trial = time_it(p + dp, timing, disc.b(z_model))
+                trial = time_it(p_trial, timing, disc.b(z_model))
                 evaluations += 1
             except (InfeasiblePathError, SolverError):
                 trial = None
@@ -190,7 +211,7 @@ def sequential_convex(
         reach = float(np.max(np.abs(dp) / scale))  # the step's length, as a fraction of scale
         boundary = reach > 0.9 * radius
         if gain > 0.0:
-            p, timing = p + dp, trial
+            p, timing = p_trial, trial
             index += 1
             accept(Iteration(index, timing.objective, float(np.max(np.abs(dp))),
                              timing.duration, time.perf_counter() - t_start,
@@ -229,7 +250,7 @@ ACTIVATION = 0.05
 
 def collision_rows(
     collisions: CollisionModel, path: BSplinePath, reach: NDArray[np.float64],
-    checks: int = 129,
+    checks: int = 129, end: bool = False,
 ) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
     """The clearances at ``checks`` uniform σ, linearised in the interior control points:
 
@@ -243,12 +264,13 @@ def collision_rows(
     Returns
     -------
     G, lower
-        ``G Δp ≥ lower``, G of shape (rows, K·n) over the interior control points (point-major).
+        ``G Δp ≥ lower``, G of shape (rows, K·n) over the interior control points (point-major),
+        (rows, (K + 1)·n) with the end point when ``end``.
     """
     inner = collisions.margin + max(0.25 * collisions.margin, 1e-3)
     sigma = np.linspace(0.0, 1.0, checks)
     q = path(sigma)
-    basis = path.basis(sigma)[:, 1:-1]  # (S, K)
+    basis = path.basis(sigma)[:, 1:None if end else -1]  # (S, K), or K + 1 with the end
     dist = np.array([collisions.distances(x) for x in q])  # (S, P)
     # how far the step can move each pair, at most ACTIVATION: farther pairs wait for the next
     # iterate (a step that brings one into contact fails the certificate and is rejected)
@@ -272,15 +294,28 @@ def collision_rows(
     return sp.csr_matrix(np.vstack(blocks)), np.concatenate(lower)
 
 
-def _with_rows(model: _Model, path_rows: sp.csr_matrix, lower: NDArray[np.float64]) -> _Model:
-    """The model with rows ``path_rows Δp ≥ lower`` that do not involve the timing."""
+def _with_rows(
+    model: _Model, path_rows: sp.csr_matrix, lower: NDArray[np.float64],
+    upper: NDArray[np.float64] | None = None,
+) -> _Model:
+    """The model with rows ``lower ≤ path_rows Δp ≤ upper`` (default no upper bound) that do
+    not involve the timing."""
     if lower.size == 0:
         return model
+    upper = np.full(lower.size, np.inf) if upper is None else upper
     z_cols = model.matrix.shape[1] - path_rows.shape[1]
     rows = sp.hstack([sp.csr_matrix((lower.size, z_cols)), path_rows]).tocsr()
     return replace(model, matrix=sp.vstack([model.matrix, rows]).tocsr(),
                    lower=np.concatenate([model.lower, lower]),
-                   upper=np.concatenate([model.upper, np.full(lower.size, np.inf)]))
+                   upper=np.concatenate([model.upper, upper]))
+
+
+def _onto(robot: Robot, goal: ToolPose, q: NDArray[np.float64]) -> NDArray[np.float64] | None:
+    """θ near q that meets the goal pose to 1e-10 (None if inverse kinematics from q fails)."""
+    try:
+        return inverse_kinematics(robot, goal, seed=q, attempts=1, iterations=50)
+    except UnreachablePoseError:
+        return None
 
 
 def _range(lim: object) -> NDArray[np.float64]:
