@@ -151,3 +151,18 @@ def test_the_goal_configuration_is_optimised_along_the_pose(rng: np.random.Gener
                                 J=moved.J, simulate=False)
         assert report.passed, report
     assert max(gains) > 0.01  # the freedom is worth something on some of them
+
+
+def test_the_workspace_figure_marks_the_target() -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    from nearopt.viz.figures import plot_workspace
+
+    robot = load("ur5")
+    goal = ToolPose((0.4, 0.2, 0.3))
+    result = nearopt.plan(robot, np.array([0.0, -1.2, 1.2, -1.5, -1.57, 0.0]), goal, grid=60,
+                          max_iterations=2)
+    fig = plot_workspace(robot, {"final": result.trajectory}, targets=(goal,))
+    star = [c for c in fig.axes[0].collections if c.get_label() == "target"][0]
+    np.testing.assert_allclose(np.ravel(star._offsets3d), goal.position, atol=1e-12)

@@ -291,3 +291,18 @@ def test_the_exported_page_draws_the_obstacles_in_place(tmp_path: Path) -> None:
     changed = np.any(np.abs(_pixels(tmp_path / "with.png") - _pixels(tmp_path / "without.png"))
                      > 25, axis=2)
     assert changed.mean() > 0.05  # the obstacles cover a good part of the view
+
+
+def test_the_exported_page_marks_a_goal_pose_with_a_triad(tmp_path: Path) -> None:
+    playwright = pytest.importorskip("playwright.sync_api")
+    goal = nearopt.ToolPose((0.5, 0.2, 0.3), (1.0, 0.0, 0.0, 0.0))
+    result = nearopt.plan(load("panda"), [0, -0.5, 0, -2, 0, 1.5, 0.8], goal, grid=60,
+                          max_iterations=2)
+    html = export_html(result, tmp_path / "goal.html")
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+        page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
+        _open(page, html.resolve().as_uri(), len(result.robot.visual_model().geometryObjects))
+        shown = np.reshape(page.evaluate(PLACEMENT, ["meshcat", "targets", "target0"]), (4, 4))
+        browser.close()
+    np.testing.assert_allclose(shown, goal.placement().homogeneous, atol=1e-9)

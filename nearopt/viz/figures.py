@@ -28,6 +28,7 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from ..collision import Scene
+    from ..kinematics import ToolPose
     from ..planning import PlanResult
     from ..robot import Robot
     from ..trajectory import Trajectory
@@ -153,7 +154,8 @@ def plot_accelerations(robot: Robot, trajectory: Trajectory, rate: float = 2000.
 
 
 def plot_workspace(
-    robot: Robot, motions: dict[str, Trajectory], poses: int = 5, scene: Scene | None = None
+    robot: Robot, motions: dict[str, Trajectory], poses: int = 5, scene: Scene | None = None,
+    targets: tuple[ToolPose, ...] = (),
 ) -> Figure:
     """The tip's path and ``poses`` link poses of each motion in the workspace (Figs. 3-5).
 
@@ -171,6 +173,8 @@ def plot_workspace(
         Link poses drawn per motion, evenly spaced in time.
     scene
         Obstacles: a planar arm's panels show their sections by its plane (orange).
+    targets
+        Tool poses: their positions are marked (a blue star, "target").
     """
     plt = _pyplot()
     tips = {label: tip_path(robot, traj) for label, traj in motions.items()}
@@ -221,6 +225,9 @@ def plot_workspace(
         ends = flat(tips[label][[0, -1]])
         ax.scatter(*ends[:1].T, s=50, color="C2", zorder=5, label="start")
         ax.scatter(*ends[1:].T, s=50, color="k", marker="s", zorder=5, label="goal")
+        if targets:
+            spots = flat(np.array([t.position for t in targets]))
+            ax.scatter(*spots.T, s=120, color="C0", marker="*", zorder=6, label="target")
         ax.set_title(f"{label} (te = {motions[label].duration:.3f} s)")
         ax.legend(loc="best", fontsize=8)
     fig.suptitle(f"{robot.name}: tip path and link poses (light: early, dark: late)")
@@ -330,6 +337,7 @@ def render_figures(
     figures["workspace.png"] = plot_workspace(
         robot, {"initial": result.initial.trajectory, "final": traj},
         scene=None if result.collisions is None else result.collisions.scene,
+        targets=() if result.goal is None else (result.goal,),
     )
     figures["history.png"] = plot_history(result, reference)
     rendered = {}

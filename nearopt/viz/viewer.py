@@ -41,6 +41,7 @@ from pinocchio.visualize.meshcat_visualizer import loadPrimitive as load_primiti
 
 from ..collision.scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sphere
 from ..errors import ConfigurationError, NearoptError
+from ..kinematics import ToolPose
 from ..outputs import write_atomically
 from .geometry import chain_points, plane_axes, tip_path
 
@@ -196,9 +197,10 @@ def _draw(
     initial: Trajectory | None,
     fps: float,
     scene: Scene | None = None,
+    targets: tuple[ToolPose, ...] = (),
 ) -> None:
-    """Load the arm, its animation (paused at t = 0), the trails, floor, obstacles and camera
-    into meshcat."""
+    """Load the arm, its animation (paused at t = 0), the trails, floor, obstacles, target
+    frames and camera into meshcat."""
     if not (np.isfinite(fps) and fps > 0):
         raise ConfigurationError(f"fps must be a positive number, got {fps}")
     visual = robot.visual_model()
@@ -225,6 +227,10 @@ def _draw(
     _floor_grid(vis, view)
     if scene is not None:
         draw_obstacles(vis, scene, view)
+    for k, target in enumerate(targets):  # a triad (x red, y green, z blue) per target pose
+        node = vis["targets"][f"target{k}"]
+        node.set_object(mg.triad(max(0.05, 0.1 * view.radius)))
+        node.set_transform(target.placement().homogeneous)
     _trail(vis, "planned", tip_path(robot, trajectory), 0xD62728)
     if initial is not None:
         _trail(vis, "initial", tip_path(robot, initial), 0x888888)
@@ -384,7 +390,7 @@ def mesh_parts(
 
 def scene_html(
     robot: Robot, trajectory: Trajectory, initial: Trajectory | None = None, fps: float = 60.0,
-    scene: Scene | None = None,
+    scene: Scene | None = None, targets: tuple[ToolPose, ...] = (),
 ) -> str:
     """The animated scene of a motion as a standalone HTML page (no server, no network).
 
@@ -400,9 +406,11 @@ def scene_html(
         Animation frames per second of motion time (it plays in real time).
     scene
         Obstacles to draw.
+    targets
+        Tool poses to mark with a triad (x red, y green, z blue).
     """
     recorder = _Recorder()
-    _draw(meshcat.Visualizer(window=recorder), robot, trajectory, initial, fps, scene)
+    _draw(meshcat.Visualizer(window=recorder), robot, trajectory, initial, fps, scene, targets)
     return recorder.html()
 
 
@@ -420,7 +428,11 @@ def export_html(result: PlanResult, path: str | Path, fps: float = 60.0) -> Path
 def plan_html(result: PlanResult, fps: float = 60.0) -> str:
     """:func:`scene_html` of a plan, with the first path's tip trail and the obstacles."""
     return scene_html(result.robot, result.trajectory, result.initial.trajectory, fps,
-                      _scene_of(result))
+                      _scene_of(result), _targets_of(result))
+
+
+def _targets_of(result: PlanResult) -> tuple[ToolPose, ...]:
+    return () if result.goal is None else (result.goal,)
 
 
 def _scene_of(result: PlanResult) -> Scene | None:
@@ -511,7 +523,7 @@ def show(result: PlanResult, fps: float = 60.0, open_browser: bool = False) -> L
     viewer = LiveViewer()
     try:
         _draw(viewer.visualizer, result.robot, result.trajectory, result.initial.trajectory, fps,
-              _scene_of(result))
+              _scene_of(result), _targets_of(result))
     except BaseException:
         viewer.close()
         raise
