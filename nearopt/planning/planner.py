@@ -28,7 +28,12 @@ import numpy as np
 from ..collision import Clearance, CollisionModel, Scene
 from ..collision.sampling import collision_free_path
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
-from ..errors import ConfigurationError, InfeasiblePathError, SolverError
+from ..errors import (
+    ConfigurationError,
+    InfeasiblePathError,
+    SolverError,
+    UnreachablePoseError,
+)
 from ..kinematics import ToolPose, inverse_kinematics
 from ..path import BSplinePath, Path, StraightPath
 from ..robot import Robot
@@ -183,6 +188,8 @@ def plan(
                 "method 'paper' cannot keep clearances from obstacles; use method='scp'"
             )
         collisions.check_configuration(q0, "start configuration q0")
+        if goal is not None:  # another solution of the pose if the first one collides
+            qe = _clear_solution(robot, goal, q0, qe, collisions)
         collisions.check_configuration(qe, "goal configuration qe")
         if not collisions.path_clearance(line).certified:
             breaks = None
@@ -278,6 +285,28 @@ def plan(
         clearance=None if collisions is None else _certify(collisions, timing.trajectory.path),
         goal=goal,
     )
+
+
+def _clear_solution(
+    robot: Robot, goal: ToolPose, q0: NDArray[np.float64], qe: NDArray[np.float64],
+    collisions: CollisionModel, tries: int = 20,
+) -> NDArray[np.float64]:
+    """An inverse-kinematics solution of the goal pose clear of the margin: ``qe`` if it is,
+    else one from seeded random starts (``qe`` when none is: the caller reports it)."""
+    if collisions.closest(qe).distance >= collisions.margin:
+        return qe
+    rng = np.random.default_rng(20261124)
+    lim = robot.limits
+    lower = np.where(np.isfinite(lim.position_lower), lim.position_lower, -np.pi)
+    upper = np.where(np.isfinite(lim.position_upper), lim.position_upper, np.pi)
+    for _ in range(tries):
+        try:
+            q = inverse_kinematics(robot, goal, seed=rng.uniform(lower, upper), attempts=3)
+        except UnreachablePoseError:
+            continue
+        if collisions.closest(q).distance >= collisions.margin:
+            return q
+    return qe
 
 
 def _free_goal(
