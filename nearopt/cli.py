@@ -91,6 +91,9 @@ def _parser() -> argparse.ArgumentParser:
                         "x y z qx qy qz qw (base frame), reached by inverse kinematics")
     p.add_argument("--frame", metavar="NAME",
                    help="the frame --goal-pose places (default: the robot's tip)")
+    p.add_argument("--via", nargs="+", type=float, action="append", default=[], metavar="V",
+                   help="a via-point passed through without stopping (joint values, like --q0); "
+                        "repeat for several, in order")
     p.add_argument("--fixed-goal", action="store_true",
                    help="keep inverse kinematics' goal configuration (by default it moves along "
                         "the pose with the path, to lower J)")
@@ -290,6 +293,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
             margin=args.margin,
             self_collision=args.self_collision,
             optimise_goal=not args.fixed_goal,
+            via=[np.deg2rad(v) if args.deg else np.asarray(v) for v in args.via],
         )
     first = "straight line" if isinstance(result.initial.trajectory.path, StraightPath) else (
         "first path, from OMPL")

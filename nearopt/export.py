@@ -51,7 +51,8 @@ def check_sampling(result: PlanResult, rate: float) -> str | None:
 
 def json_text(result: PlanResult, rate: float = 1000.0) -> str:
     """The plan as ``{"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
-    "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists).
+    "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists), and ``"via": [{"t",
+    "q"}, …]`` when the motion passes via-points.
 
     Warns (:class:`~nearopt.SamplingWarning`) if the rate is too low to resolve the motion.
     """
@@ -67,6 +68,9 @@ def json_text(result: PlanResult, rate: float = 1000.0) -> str:
         **{key: getattr(samples, key).tolist() for key in KEYS},
         "history": [{"J": it.J, "alpha": it.alpha} for it in result.history],
     }
+    if result.via:  # where the motion passes its via-points (segment boundaries)
+        document["via"] = [{"t": float(t), "q": q.tolist()}
+                           for t, q in zip(result.via_times, result.via, strict=True)]
     return json.dumps(document)
 
 

@@ -120,6 +120,19 @@ class Trajectory:
         sd = np.maximum(self.lam[k] + acc * tau, 0.0)
         return s, sd, acc
 
+    def time_at(self, s: ArrayLike) -> NDArray[np.float64]:
+        """t(s): when the motion reaches path parameters s ∈ [0, s_e] [s], shape (M,) (the
+        inverse of :meth:`path_parameter`, exact on each segment)."""
+        s = np.clip(np.atleast_1d(np.asarray(s, dtype=float)), 0.0, self.s[-1])
+        k = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.s.size - 2)
+        ds = s - self.s[k]
+        lam, acc = self.lam[k], self.a[k]
+        # s_k + λ τ + ½ a τ² = s: τ = 2 Δs / (λ + √(λ² + 2 a Δs)) (stable for a → 0 and λ = 0)
+        root = np.sqrt(np.maximum(lam**2 + 2.0 * acc * ds, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tau = np.where(ds > 0.0, 2.0 * ds / (lam + root), 0.0)
+        return self.t[k] + tau
+
     def __call__(self, t: ArrayLike, order: Literal[0, 1, 2] = 0) -> NDArray[np.float64]:
         """θ(t) (order 0), θ̇(t) (1) or θ̈(t) (2), shape (M, n); at a knot, the segment after it."""
         if order not in (0, 1, 2):

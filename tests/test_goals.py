@@ -122,8 +122,10 @@ def test_an_unknown_frame_lists_the_frames() -> None:
     ["--qe", *["0.1"] * 6, "--goal-pose", "0.4", "0", "0.4"],
     ["--goal-pose", "0.4", "0"],
     ["--frame", "tool0", "--qe", *["0.1"] * 6],
+    ["--qe", *["0.1"] * 6, "--via", "0", "0"],
+    ["--qe", *["0.1"] * 6, "--via", "9", "0", "0", "0", "0", "0"],
 ])
-def test_goal_options_that_do_not_go_together(args: list[str]) -> None:
+def test_bad_goal_and_via_options_get_one_line(args: list[str]) -> None:
     run = subprocess.run(
         [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--q0", *["0"] * 6,
          *args], capture_output=True, text=True, timeout=120,
@@ -166,3 +168,40 @@ def test_the_workspace_figure_marks_the_target() -> None:
     fig = plot_workspace(robot, {"final": result.trajectory}, targets=(goal,))
     star = [c for c in fig.axes[0].collections if c.get_label() == "target"][0]
     np.testing.assert_allclose(np.ravel(star._offsets3d), goal.position, atol=1e-12)
+
+
+def test_via_points_are_passed_exactly_without_stopping(tmp_path: Path) -> None:
+    """ur5 through a joint via-point (CLI) and panda through a tool pose: every iterate's path
+    goes through, the written motion is there at the reported time, moving."""
+    q0, qe = [-0.8, -1.2, 1.2, -1.5, -1.57, 0.0], [0.8, -1.2, 1.2, -1.5, -1.57, 0.0]
+    via = [0.0, -1.6, 0.8, -1.0, -1.57, 0.5]
+    out = tmp_path / "via.json"
+    run = subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--q0", *map(str, q0),
+         "--qe", *map(str, qe), "--via", *map(str, via), "--beta", "0.001", "--quiet",
+         "--rate", "2000", "--json", str(out)],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    doc = json.loads(out.read_text())
+    (mark,) = doc["via"]
+    t, q, qd = (np.array(doc[k]) for k in ("t", "q", "qd"))
+    np.testing.assert_allclose(mark["q"], via, atol=1e-12)
+    k = int(np.argmin(np.abs(t - mark["t"])))
+    speed = np.abs(qd).max(axis=1)
+    assert np.abs(q[k] - via).max() < speed[k] / 2000.0 + 1e-9  # within one sample's motion
+    assert speed[k] > 0.5  # passes, does not stop
+
+    robot = load("panda")
+    start = np.array([0.0, -0.5, 0.0, -2.0, 0.0, 1.5, 0.8])
+    pose = pose_of(robot, np.array([0.6, -0.2, 0.3, -1.8, 0.1, 1.8, 0.5]))
+    result = nearopt.plan(robot, start, [1.0, 0.0, 0.5, -1.5, 0.0, 2.0, 0.0], via=[pose],
+                          grid=100, max_iterations=20)
+    (tv,) = result.via_times
+    at = result.trajectory(np.array([tv]), 0)[0]
+    assert max(pose_error(robot, at, pose)) < 1e-9
+    assert np.abs(result.trajectory(np.array([tv]), 1)[0]).max() > 0.1
+    for it in result.history:
+        assert max(pose_error(robot, it.path(np.array(result.via_s))[0], pose)) < 1e-9
+    assert_independent_checks(robot, result.trajectory, result.cost, result.J, start,
+                              np.array([1.0, 0.0, 0.5, -1.5, 0.0, 2.0, 0.0]))

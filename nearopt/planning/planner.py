@@ -19,7 +19,7 @@ update (stage 2) is one of :class:`~nearopt.planning.Method`:
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -29,6 +29,7 @@ from ..collision import Clearance, CollisionModel, Scene
 from ..collision.sampling import collision_free_path
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import (
+    CollisionError,
     ConfigurationError,
     InfeasiblePathError,
     SolverError,
@@ -48,7 +49,7 @@ from .records import (
     SCPOptions,
     StopReason,
 )
-from .scp import sequential_convex
+from .scp import path_through, sequential_convex
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -79,6 +80,7 @@ def plan(
     margin: float | None = None,
     self_collision: bool | None = None,
     optimise_goal: bool = True,
+    via: Sequence[ArrayLike | ToolPose] = (),
 ) -> PlanResult:
     """Plan a near-optimum motion from rest at θ0 to rest at θe (Sections 4-6).
 
@@ -124,6 +126,11 @@ def plan(
         configurations that hold the pose (its step in the null space of the frame's Jacobian,
         projected back by inverse kinematics), so a redundant arm ends where J is lowest;
         False keeps inverse kinematics' θe.
+    via
+        Via-points passed through without stopping, in order: joint vectors or
+        :class:`~nearopt.ToolPose` (inverse kinematics from the previous point). The path goes
+        through each exactly at every iterate (at the σ of the polyline's arc length); stage 1
+        times the whole path. ``"scp"`` only.
 
     Returns
     -------
@@ -175,13 +182,27 @@ def plan(
     if position_limits:
         _check_within(robot, q0, "q0")
         _check_within(robot, qe, "qe")
-    if np.array_equal(q0, qe):
+    vias = _via_points(robot, via, q0, position_limits)
+    if vias and method != Method.SCP:
+        raise ConfigurationError("via-points need method 'scp' (the B-spline path)")
+    if np.array_equal(q0, qe) and not vias:
         raise ConfigurationError(
             "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
         )
     collisions = _collision_model(robot, scene, margin, self_collision)
     line: Path = StraightPath(q0, qe)
     start = None
+    via_s: tuple[float, ...] = ()
+    if vias:
+        points = np.vstack([q0, *vias, qe])
+        if np.any(np.all(np.diff(points, axis=0) == 0.0, axis=1)):
+            raise ConfigurationError("two consecutive points (start, via-points, goal) are equal")
+        k = max(options.control_points, 4 * (len(vias) + 1))
+        breaks = None
+        if options.knots == "clustered":
+            breaks = 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, k)[1:-1]))
+        start, sigma = path_through(points, k, breaks)
+        line, via_s = start, tuple(float(x) for x in sigma)
     if collisions is not None:
         if method == Method.PAPER:
             raise ConfigurationError(
@@ -191,7 +212,14 @@ def plan(
         if goal is not None:  # another solution of the pose if the first one collides
             qe = _clear_solution(robot, goal, q0, qe, collisions)
         collisions.check_configuration(qe, "goal configuration qe")
-        if not collisions.path_clearance(line).certified:
+        for k_via, q_via in enumerate(vias):
+            collisions.check_configuration(q_via, f"via-point {k_via}")
+        if vias and not collisions.path_clearance(line).certified:
+            raise CollisionError(
+                "the first path through the via-points collides; planning around obstacles with "
+                "via-points is not supported yet (add via-points that avoid them)"
+            )
+        if not vias and not collisions.path_clearance(line).certified:
             breaks = None
             k = options.control_points
             if options.knots == "clustered":
@@ -252,11 +280,11 @@ def plan(
         try:
             if method == Method.SCP:
                 outcome = sequential_convex(robot, q0, qe, cost, **common,
-                                            collisions=collisions, start=start)
+                                            collisions=collisions, start=start, via=via_s)
                 if goal is not None and optimise_goal and len(history) <= max_iterations:
                     # then θe moves along the pose, from that plan: J can only go down
                     outcome = _free_goal(robot, q0, qe, cost, goal, outcome, common, history,
-                                         collisions)
+                                         collisions, via_s)
             else:
                 outcome = paper_iterations(robot, initial, cost, **common)
             timing, reason = outcome.timing, outcome.reason
@@ -284,7 +312,31 @@ def plan(
         collisions=collisions,
         clearance=None if collisions is None else _certify(collisions, timing.trajectory.path),
         goal=goal,
+        via=tuple(vias),
+        via_s=via_s,
     )
+
+
+def _via_points(
+    robot: Robot, via: Sequence[ArrayLike | ToolPose], q0: NDArray[np.float64],
+    position_limits: bool,
+) -> list[NDArray[np.float64]]:
+    """The via-points as joint vectors (tool poses by inverse kinematics from the previous
+    point), checked."""
+    if isinstance(via, np.ndarray) and via.ndim == 1:
+        raise ConfigurationError("via is a list of via-points (joint vectors or ToolPoses)")
+    out: list[NDArray[np.float64]] = []
+    previous = q0
+    for k, point in enumerate(via):
+        if isinstance(point, ToolPose):
+            q = inverse_kinematics(robot, point, seed=previous)
+        else:
+            q = robot.check_configuration(point, f"via[{k}]")
+        if position_limits:
+            _check_within(robot, q, f"via[{k}]")
+        out.append(q)
+        previous = q
+    return out
 
 
 def _clear_solution(
@@ -312,7 +364,7 @@ def _clear_solution(
 def _free_goal(
     robot: Robot, q0: NDArray[np.float64], qe: NDArray[np.float64], cost: Cost, goal: ToolPose,
     first: MethodOutcome, common: dict[str, object], history: list[Iteration],
-    collisions: CollisionModel | None,
+    collisions: CollisionModel | None, via: tuple[float, ...] = (),
 ) -> MethodOutcome:
     """Stage 2 continued from ``first`` with θe free along the goal pose; its iterates follow
     the first run's in the history (its iterate 0, the same path, is not repeated)."""
@@ -326,7 +378,7 @@ def _free_goal(
     options = dict(common, accept=follow,
                    max_iterations=int(common["max_iterations"]) - offset)  # type: ignore[call-overload]
     second = sequential_convex(robot, q0, qe, cost, **options, collisions=collisions,
-                               start=first.timing.trajectory.path, goal=goal)
+                               start=first.timing.trajectory.path, goal=goal, via=via)
     if second.timing.J > first.timing.J:  # e.g. re-timed on another grid: keep the first
         return first
     return MethodOutcome(second.timing, second.reason, second.message,

@@ -10,7 +10,11 @@ from dataclasses import dataclass
 from enum import StrEnum
 from typing import TYPE_CHECKING, Literal
 
+import numpy as np
+
 if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
     from ..collision import Clearance, CollisionModel
     from ..cost import Cost
     from ..kinematics import ToolPose
@@ -202,6 +206,10 @@ class PlanResult:
         The certified clearance of the returned path (the closest pair, where), when checked.
     goal
         The tool pose the goal configuration was found for, when the goal was one.
+    via
+        The via-points passed through [rad or m], each (n,).
+    via_s
+        The path parameters where the path passes them.
     """
 
     robot: Robot
@@ -216,6 +224,13 @@ class PlanResult:
     collisions: CollisionModel | None = None
     clearance: Clearance | None = None
     goal: ToolPose | None = None
+    via: tuple[NDArray[np.float64], ...] = ()
+    via_s: tuple[float, ...] = ()
+
+    @property
+    def via_times(self) -> NDArray[np.float64]:
+        """When the motion passes each via-point [s], shape (len(via),)."""
+        return self.trajectory.time_at(np.asarray(self.via_s, dtype=float))
 
     @property
     def trajectory(self) -> Trajectory:

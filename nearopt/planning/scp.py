@@ -56,7 +56,7 @@ if TYPE_CHECKING:
     from ..robot import Robot
     from ..timing import TimingResult
 
-__all__ = ["sequential_convex", "collision_rows"]
+__all__ = ["sequential_convex", "collision_rows", "path_through"]
 
 
 def sequential_convex(
@@ -76,6 +76,7 @@ def sequential_convex(
     collisions: CollisionModel | None = None,
     start: BSplinePath | None = None,
     goal: ToolPose | None = None,
+    via: tuple[float, ...] = (),
 ) -> MethodOutcome:
     """Improve the path from the straight line by sequential convex programming.
 
@@ -113,6 +114,9 @@ def sequential_convex(
         A tool pose the end θe must keep (to 1e-10 m and rad): θe then moves with the path, its
         step in the null space of the frame's Jacobian and projected back onto the pose by
         inverse kinematics; None: θe fixed.
+    via
+        Path parameters σ_v where the path must keep its current configuration (via-points
+        passed through: Σ_j B_j(σ_v) Δc_j = 0, exact since linear); ``start`` goes through them.
     """
     weights = cost.torque_weights(robot.n) if isinstance(cost, TorqueCost) else None
     if weights is None:
@@ -172,6 +176,10 @@ def sequential_convex(
         if collisions is not None:
             model = _with_rows(model, *collision_rows(collisions, path_of(p), radius * scale[:n],
                                                        end=goal is not None))
+        if via:  # every iterate goes through the via-points: B(σ_v) Δp = 0 per joint
+            at = start.basis(np.asarray(via))[:, 1:None if goal is not None else -1]
+            rows = sp.csr_matrix(np.kron(at, np.eye(n)))
+            model = _with_rows(model, rows, np.zeros(rows.shape[0]), np.zeros(rows.shape[0]))
         if goal is not None:  # θe moves along the pose: J_task Δθe = 0
             task = task_jacobian(robot, goal, p[-n:])
             rows = sp.hstack([sp.csr_matrix((task.shape[0], p.size - n)), sp.csr_matrix(task)])
@@ -316,6 +324,37 @@ def _onto(robot: Robot, goal: ToolPose, q: NDArray[np.float64]) -> NDArray[np.fl
         return inverse_kinematics(robot, goal, seed=q, attempts=1, iterations=50)
     except UnreachablePoseError:
         return None
+
+
+def path_through(
+    points: NDArray[np.float64], interior: int, breaks: NDArray[np.float64] | None = None,
+) -> tuple[BSplinePath, NDArray[np.float64]]:
+    """A B-spline from ``points[0]`` to ``points[-1]`` through the points between, exactly,
+    and the σ where it passes them (by joint-space arc length along the polyline).
+
+    The control points lie on the polyline at their Greville abscissae, then move by the least
+    change that puts θ(σ_v) on each via-point exactly.
+
+    Parameters
+    ----------
+    points
+        Start, via-points, goal [rad or m], shape (m + 2, n).
+    interior
+        Interior control points K (≥ m).
+    breaks
+        Interior knots (default uniform).
+    """
+    from ..collision.sampling import fit_polyline
+
+    arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
+    sigma = arc[1:-1] / arc[-1]
+    spline = fit_polyline(points, interior, breaks)
+    control = spline.control_points.copy()
+    basis = spline.basis(sigma)
+    inner = basis[:, 1:-1]
+    miss = points[1:-1] - basis @ control  # (m, n)
+    control[1:-1] += inner.T @ np.linalg.solve(inner @ inner.T, miss)
+    return BSplinePath(control, breaks), sigma
 
 
 def _range(lim: object) -> NDArray[np.float64]:
