@@ -190,6 +190,17 @@ def plan(
             "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
         )
     collisions = _collision_model(robot, scene, margin, self_collision)
+    if collisions is not None:
+        if method == Method.PAPER:
+            raise ConfigurationError(
+                "method 'paper' cannot keep clearances from obstacles; use method='scp'"
+            )
+        collisions.check_configuration(q0, "start configuration q0")
+        if goal is not None:  # another solution of the pose if the first one collides
+            qe = _clear_solution(robot, goal, q0, qe, collisions)
+        collisions.check_configuration(qe, "goal configuration qe")
+        for k_via, q_via in enumerate(vias):
+            collisions.check_configuration(q_via, f"via-point {k_via}")
     line: Path = StraightPath(q0, qe)
     start = None
     via_s: tuple[float, ...] = ()
@@ -204,16 +215,6 @@ def plan(
         start, sigma = path_through(points, k, breaks)
         line, via_s = start, tuple(float(x) for x in sigma)
     if collisions is not None:
-        if method == Method.PAPER:
-            raise ConfigurationError(
-                "method 'paper' cannot keep clearances from obstacles; use method='scp'"
-            )
-        collisions.check_configuration(q0, "start configuration q0")
-        if goal is not None:  # another solution of the pose if the first one collides
-            qe = _clear_solution(robot, goal, q0, qe, collisions)
-        collisions.check_configuration(qe, "goal configuration qe")
-        for k_via, q_via in enumerate(vias):
-            collisions.check_configuration(q_via, f"via-point {k_via}")
         if vias and not collisions.path_clearance(line).certified:
             raise CollisionError(
                 "the first path through the via-points collides; planning around obstacles with "
