@@ -274,7 +274,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
         robot.frame_id(args.frame)  # an unknown frame is named before any work
     else:
         qe = np.deg2rad(args.qe) if args.deg else np.asarray(args.qe)
-    scene = Scene.from_file(args.scene) if args.scene else None
+    scene = Scene.from_file(args.scene) if args.scene is not None else None
 
     def progress(entry: Iteration) -> None:
         print(_format(entry), file=out, flush=True)

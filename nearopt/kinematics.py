@@ -45,19 +45,17 @@ class ToolPose:
     frame: str | None = None
 
     def __post_init__(self) -> None:
-        p = np.asarray(self.position, dtype=float)
-        if p.shape != (3,) or not np.all(np.isfinite(p)):
-            raise ConfigurationError(f"a tool position is 3 finite numbers [m], got "
-                                     f"{self.position!r}")
+        p = _floats(self.position, 3, "a tool position is 3 finite numbers [m]")
         object.__setattr__(self, "position", tuple(float(x) for x in p))
         if self.quaternion is not None:
-            q = np.asarray(self.quaternion, dtype=float)
-            if q.shape != (4,) or not np.all(np.isfinite(q)) or np.linalg.norm(q) < 1e-9:
-                raise ConfigurationError(
-                    f"a tool orientation is a non-zero quaternion (qx, qy, qz, qw), got "
-                    f"{self.quaternion!r}"
-                )
+            message = "a tool orientation is a non-zero quaternion (qx, qy, qz, qw)"
+            q = _floats(self.quaternion, 4, message)
+            q = q / np.max(np.abs(q)) if np.any(q != 0.0) else q  # no overflow in the norm
+            if np.linalg.norm(q) < 1e-9:
+                raise ConfigurationError(f"{message}, got {self.quaternion!r}")
             object.__setattr__(self, "quaternion", tuple(float(x) for x in q / np.linalg.norm(q)))
+        if self.frame is not None and (not isinstance(self.frame, str) or not self.frame):
+            raise ConfigurationError(f"a frame is given by its name, got {self.frame!r}")
 
     def placement(self) -> pin.SE3:
         """The target as a Pinocchio placement (identity rotation for a position only)."""
@@ -66,6 +64,17 @@ class ToolPose:
             qx, qy, qz, qw = self.quaternion
             rotation = pin.Quaternion(qw, qx, qy, qz).toRotationMatrix()
         return pin.SE3(rotation, np.asarray(self.position))
+
+
+def _floats(value: object, size: int, message: str) -> NDArray[np.float64]:
+    """``value`` as ``size`` finite floats, or a ConfigurationError with ``message``."""
+    try:
+        a = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        a = np.zeros(0)
+    if isinstance(value, str | bytes) or a.shape != (size,) or not np.all(np.isfinite(a)):
+        raise ConfigurationError(f"{message}, got {value!r}")
+    return a
 
 
 def pose_error(robot: Robot, q: ArrayLike, pose: ToolPose) -> tuple[float, float]:

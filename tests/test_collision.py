@@ -353,3 +353,34 @@ def test_the_cli_refuses_a_bad_scene_in_one_line_and_writes_nothing(tmp_path) ->
     assert run.returncode != 0 and not out.exists()
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and "'post'" in lines[0] and "cylinder" in lines[0], run.stderr
+
+
+@pytest.mark.parametrize("make", [
+    lambda: Obstacle("a", Box((0.1, 0.1))),
+    lambda: Obstacle("a", Box(1.0)),
+    lambda: Obstacle("a", Sphere("big")),
+    lambda: Obstacle("a", HalfSpace((0, 0, 1), None)),
+    lambda: Obstacle("", Sphere(0.1)),
+    lambda: Obstacle(5, Sphere(0.1)),
+    lambda: Scene(Obstacle("a", Sphere(0.1))),
+    lambda: Scene(None),
+    lambda: Scene.from_file(""),
+])
+def test_bad_scene_records_in_python_are_scene_errors(make) -> None:  # noqa: ANN001
+    with pytest.raises(SceneError):
+        make()
+
+
+@pytest.mark.parametrize("vertex", ["nan 0 1", "inf 0 1", "1e39 0 1"])
+def test_a_mesh_with_non_finite_vertices_is_refused(tmp_path, vertex: str) -> None:  # noqa: ANN001
+    import trimesh
+
+    trimesh.creation.box((1.0, 1.0, 1.0)).export(tmp_path / "cube.stl", file_type="stl_ascii")
+    text = (tmp_path / "cube.stl").read_text().splitlines()
+    k = next(i for i, line in enumerate(text) if line.strip().startswith("vertex"))
+    text[k] = f"      vertex {vertex}"
+    (tmp_path / "bad.stl").write_text("\n".join(text) + "\n")
+    (tmp_path / "cell.toml").write_text('[[obstacle]]\nname = "m"\nmesh = "bad.stl"\n'
+                                        'position = [2, 2, 2]\n')
+    with pytest.raises(SceneError, match="'m'.*not finite"):
+        CollisionModel(load("ur5"), Scene.from_file(tmp_path / "cell.toml"))

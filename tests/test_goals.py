@@ -205,3 +205,18 @@ def test_via_points_are_passed_exactly_without_stopping(tmp_path: Path) -> None:
         assert max(pose_error(robot, it.path(np.array(result.via_s))[0], pose)) < 1e-9
     assert_independent_checks(robot, result.trajectory, result.cost, result.J, start,
                               np.array([1.0, 0.0, 0.5, -1.5, 0.0, 2.0, 0.0]))
+
+
+def test_bad_tool_poses_and_via_lists_are_configuration_errors() -> None:
+    robot = load("ur5")
+    for make in (lambda: ToolPose("abc"), lambda: ToolPose((0.4j, 0.2, 0.3)),
+                 lambda: ToolPose((0.4, 0.2, 0.3), "abcd"),
+                 lambda: ToolPose((0.4, 0.2, 0.3), frame=5)):
+        with pytest.raises(nearopt.ConfigurationError):
+            make()
+    # a huge quaternion is the same orientation, not an overflow to zero
+    assert ToolPose((0.4, 0.2, 0.3), (1e300, 0, 0, 0)).quaternion == (1.0, 0.0, 0.0, 0.0)
+    q0, qe = np.zeros(6), np.full(6, 0.5)
+    with pytest.raises(nearopt.ConfigurationError, match="each a joint vector of 6 values"):
+        nearopt.plan(robot, q0, qe, via=[0.0, -1.2, 1.2, -1.5, -1.57, 0.0])
+    assert not nearopt.plan(robot, q0, qe, via=None, max_iterations=0).via

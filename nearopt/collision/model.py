@@ -458,10 +458,14 @@ def _convex(geometry: coal.CollisionGeometry, name: str) -> coal.CollisionGeomet
     if not isinstance(geometry, coal.BVHModelBase):
         return geometry
     points = np.asarray(geometry.vertices(), dtype=float).reshape(-1, 3)
+    if not np.all(np.isfinite(points)):
+        raise URDFError(f"the mesh of {name!r} has vertices that are not finite numbers")
+    if points.shape[0] < 4 or np.ptp(points, axis=0).max() < 1e-6:
+        raise URDFError(f"the mesh of {name!r} has no volume (smaller than 1 µm)")
     try:
         hull = ConvexHull(points)
-    except QhullError as exc:
-        raise URDFError(f"the collision mesh of {name!r} has no volume: {exc}") from None
+    except (QhullError, ValueError) as exc:
+        raise URDFError(f"the mesh of {name!r} has no volume: {exc}") from None
     return coal.Convex.convexHull(list(points[hull.vertices]), False, None)
 
 
@@ -484,9 +488,9 @@ def _coal_shape(shape: object, name: str) -> coal.CollisionGeometry:
                              obstacle=name, field="mesh") from None
         try:
             return _convex(bvh, name)
-        except URDFError:
-            raise SceneError(f"obstacle {name!r}: the mesh {shape.path} has no volume",
-                             obstacle=name, field="mesh") from None
+        except URDFError as exc:
+            raise SceneError(f"obstacle {name!r}: {shape.path}: {exc}", obstacle=name,
+                             field="mesh") from None
     raise SceneError(f"obstacle {name!r}: unknown shape {type(shape).__name__}", obstacle=name)
 
 

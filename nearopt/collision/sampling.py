@@ -153,7 +153,8 @@ def collision_free_path(
     if not found:
         raise CollisionError(
             f"no collision-free path from the start to the goal found in {time_limit:.3g} s "
-            f"(OMPL RRT-Connect, clearance {clearance * 1e3:.0f} mm; the straight line collides)"
+            f"(OMPL RRT-Connect's share of the time limit, clearance {clearance * 1e3:.0f} mm; "
+            "the straight line collides)"
         )
     return found
 

@@ -137,7 +137,16 @@ class Obstacle:
     rpy: tuple[float, float, float] = (0.0, 0.0, 0.0)
 
     def __post_init__(self) -> None:
-        _check_shape(self.name, self.shape)
+        if not isinstance(self.name, str) or not self.name:
+            raise SceneError(f"an obstacle's name is a non-empty string, got {self.name!r}",
+                             field="name")
+        try:
+            _check_shape(self.name, self.shape)
+        except (TypeError, ValueError) as exc:
+            if isinstance(exc, SceneError):
+                raise
+            raise SceneError(f"obstacle {self.name!r}: a bad {type(self.shape).__name__}: "
+                             f"{exc}", obstacle=self.name, field="shape") from None
         object.__setattr__(self, "position", _vector(self.name, "position", self.position, 3))
         object.__setattr__(self, "rpy", _vector(self.name, "rpy", self.rpy, 3))
 
@@ -171,6 +180,9 @@ class Scene:
     source: Path | None = field(default=None, compare=False)
 
     def __post_init__(self) -> None:
+        if isinstance(self.obstacles, Obstacle) or not isinstance(self.obstacles, tuple | list):
+            raise SceneError(f"a scene's obstacles are a tuple of Obstacle records, got "
+                             f"{type(self.obstacles).__name__}")
         object.__setattr__(self, "obstacles", tuple(self.obstacles))
         seen: set[str] = set()
         for ob in self.obstacles:
@@ -199,6 +211,8 @@ class Scene:
             A missing or malformed file, an unknown field, a bad value; the message names the
             file, the obstacle and the field.
         """
+        if not isinstance(path, str | Path) or not str(path):
+            raise SceneError(f"a scene file is a path, got {path!r}")
         path = Path(path).expanduser().resolve()
         try:
             data = tomllib.loads(path.read_text(encoding="utf-8"))
@@ -302,6 +316,9 @@ def _check_shape(name: str, shape: Shape) -> None:
                                  obstacle=name, field=field_)
 
     if isinstance(shape, Box):
+        if np.shape(shape.size) != (3,):
+            raise SceneError(f"obstacle {name!r}: box is 3 sizes x, y, z [m], got "
+                             f"{shape.size!r}", obstacle=name, field="box")
         positive("box", *shape.size)
     elif isinstance(shape, Sphere):
         positive("sphere", shape.radius)
@@ -326,10 +343,15 @@ def _check_shape(name: str, shape: Shape) -> None:
         object.__setattr__(shape, "normal", tuple(float(x) for x in n / scale))
         object.__setattr__(shape, "offset", float(shape.offset) / scale)
     elif isinstance(shape, Mesh):
-        if not Path(shape.path).is_file():
-            raise SceneError(f"obstacle {name!r}: the mesh file {shape.path} does not exist",
+        path = Path(shape.path)
+        if not path.is_file():
+            state = "is not a file" if path.exists() else "does not exist"
+            raise SceneError(f"obstacle {name!r}: the mesh file {shape.path} {state}",
                              obstacle=name, field="mesh")
         positive("scale", shape.scale)
+        if not 1e-6 <= shape.scale <= 1e6:
+            raise SceneError(f"obstacle {name!r}: scale must be within [1e-6, 1e6], got "
+                             f"{shape.scale!r}", obstacle=name, field="scale")
     else:
         raise SceneError(f"obstacle {name!r}: unknown shape {type(shape).__name__} (Box, "
                          "Sphere, Cylinder, Capsule, HalfSpace, Mesh)", obstacle=name,

@@ -80,7 +80,7 @@ def plan(
     margin: float | None = None,
     self_collision: bool | None = None,
     optimise_goal: bool = True,
-    via: Sequence[ArrayLike | ToolPose] = (),
+    via: Sequence[ArrayLike | ToolPose] | None = (),
 ) -> PlanResult:
     """Plan a near-optimum motion from rest at θ0 to rest at θe (Sections 4-6).
 
@@ -276,7 +276,8 @@ def plan(
                          time.perf_counter() - t_start, line), initial)
     if max_iterations == 0:
         timing, reason, evaluations = initial, StopReason.ITERATION_LIMIT, 1
-        message = "max_iterations = 0: the straight line, timed by stage 1"
+        first = "the straight line" if start is None else "the first path"
+        message = f"max_iterations = 0: {first}, timed by stage 1"
     else:
         try:
             if method == Method.SCP:
@@ -319,13 +320,21 @@ def plan(
 
 
 def _via_points(
-    robot: Robot, via: Sequence[ArrayLike | ToolPose], q0: NDArray[np.float64],
+    robot: Robot, via: Sequence[ArrayLike | ToolPose] | None, q0: NDArray[np.float64],
     position_limits: bool,
 ) -> list[NDArray[np.float64]]:
     """The via-points as joint vectors (tool poses by inverse kinematics from the previous
     point), checked."""
-    if isinstance(via, np.ndarray) and via.ndim == 1:
-        raise ConfigurationError("via is a list of via-points (joint vectors or ToolPoses)")
+    if via is None:
+        return []
+    flat = isinstance(via, np.ndarray) and via.ndim == 1
+    if flat or not isinstance(via, Sequence | np.ndarray) or isinstance(via, str) or any(
+        isinstance(v, int | float | np.number) for v in via
+    ):
+        raise ConfigurationError(
+            f"via is a list of via-points, each a joint vector of {robot.n} values or a "
+            f"ToolPose (e.g. via=[q1, q2]), got {via!r:.80}"
+        )
     out: list[NDArray[np.float64]] = []
     previous = q0
     for k, point in enumerate(via):
