@@ -384,3 +384,18 @@ def test_a_mesh_with_non_finite_vertices_is_refused(tmp_path, vertex: str) -> No
                                         'position = [2, 2, 2]\n')
     with pytest.raises(SceneError, match="'m'.*not finite"):
         CollisionModel(load("ur5"), Scene.from_file(tmp_path / "cell.toml"))
+
+
+def test_the_same_request_gives_the_same_plan_whatever_ran_before() -> None:
+    """OMPL seeds once per process: its searches run in a freshly seeded child, so a repeated
+    request (here after another one) gives bit-identical samples."""
+    robot = load("ur5")
+    q0, qe = (np.array(v) for v in MOTIONS["ur5"])
+
+    def run() -> np.ndarray:
+        result = plan(robot, q0, qe, TorqueCost(0.001), scene=CELL, max_iterations=3, grid=60)
+        return result.trajectory.sample(500.0).q
+
+    first = run()
+    plan(robot, qe, q0, TorqueCost(0.001), scene=CELL, max_iterations=1, grid=60)  # another
+    assert np.array_equal(first, run())

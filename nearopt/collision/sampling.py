@@ -7,18 +7,21 @@ certified collision-free by :meth:`CollisionModel.path_clearance` (not sampled a
 The fitted B-spline is certified too; if it is not, more control points follow the polyline more
 closely.
 
-OMPL's random generator is seeded once per process (OMPL allows no reseeding): the first plan of
-a process is reproducible, later ones draw further from the same stream.
+OMPL's random generator can be seeded once per process only; each search therefore runs in a
+forked child seeded afresh, so that a request gives the same paths whatever ran before it.
 """
 
 from __future__ import annotations
 
+import os
+import pickle
+import signal
 import time
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import CollisionError, ConfigurationError
+from ..errors import CollisionError, ConfigurationError, SolverError
 from ..path import BSplinePath, StraightPath
 
 if TYPE_CHECKING:
@@ -26,7 +29,7 @@ if TYPE_CHECKING:
 
     from .model import CollisionModel
 
-__all__ = ["collision_free_path", "fit_polyline", "OMPL_SEED"]
+__all__ = ["collision_free_path", "search_paths", "fit_polyline", "OMPL_SEED"]
 
 OMPL_SEED = 20260101
 _seeded = False
@@ -45,6 +48,62 @@ def collision_free_path(
 ) -> list[BSplinePath]:
     """Paths from θ0 to θe whose every pair keeps the margin, certified: one per OMPL search
     that succeeds (they may pass the obstacles on different sides).
+
+    The search runs in a forked child process whose OMPL generator is freshly seeded, so the
+    same request gives the same paths whatever ran before in this process (OMPL seeds once per
+    process); where ``os.fork`` is missing it runs here (reproducible for the first request).
+    Parameters and errors as :func:`search_paths`.
+    """
+    arguments = dict(control_points=control_points, breaks=breaks, time_limit=time_limit,
+                     clearance=clearance, attempts=attempts)
+    if not hasattr(os, "fork") or _seeded:
+        return search_paths(collisions, q0, qe, **arguments)  # type: ignore[arg-type]
+    read, write = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child: search, send the control points (or the error) back, exit
+        os.close(read)
+        try:
+            found = search_paths(collisions, q0, qe, **arguments)  # type: ignore[arg-type]
+            reply: tuple[str, object] = ("ok", [p.control_points for p in found])
+        except CollisionError as exc:
+            reply = ("collision", str(exc))
+        except BaseException as exc:  # noqa: BLE001 - reported to the parent
+            reply = ("error", f"{type(exc).__name__}: {exc}")
+        with os.fdopen(write, "wb") as stream:
+            stream.write(pickle.dumps(reply))
+        os._exit(0)
+    os.close(write)
+    try:
+        with os.fdopen(read, "rb") as stream:
+            data = stream.read()
+    except BaseException:  # Ctrl-C: the child goes too
+        os.kill(pid, signal.SIGKILL)
+        os.waitpid(pid, 0)
+        raise
+    os.waitpid(pid, 0)
+    if not data:
+        raise SolverError("the OMPL search ended without an answer (its process died)")
+    kind, value = pickle.loads(data)
+    if kind == "collision":
+        raise CollisionError(str(value))
+    if kind == "error":
+        raise SolverError(f"the OMPL search failed: {value}")
+    return [BSplinePath(c, breaks if c.shape[0] == control_points + 2 else None)
+            for c in value]  # type: ignore[union-attr]
+
+
+def search_paths(
+    collisions: CollisionModel,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    *,
+    control_points: int,
+    breaks: NDArray[np.float64] | None,
+    time_limit: float,
+    clearance: float | None = None,
+    attempts: int = 3,
+) -> list[BSplinePath]:
+    """:func:`collision_free_path` in this process.
 
     Parameters
     ----------
