@@ -311,7 +311,7 @@ class CollisionModel:
         if dist.size == 0:
             return Clearance(True, level, self.closest(q[0]), 0.0, 0)
 
-        def contact(i_s: int, k: int, d: float, at: NDArray[np.float64]) -> Contact:
+        def contact(k: int, d: float, at: NDArray[np.float64]) -> Contact:
             self._all(at)
             r = self._gdata.distanceResults[int(k)]
             return Contact(self.pairs[k], d, np.array([r.getNearestPoint1(),
@@ -319,7 +319,7 @@ class CollisionModel:
 
         worst = (float(dist[k_min]), float(s[k_min[0]]), int(k_min[1]))
         if worst[0] < level:
-            return Clearance(False, level, contact(0, worst[2], worst[0], q[k_min[0]]), worst[1],
+            return Clearance(False, level, contact(worst[2], worst[0], q[k_min[0]]), worst[1],
                              checks)
         slope = _slope_bound(path)
         # intervals (a, b, d_a, d_b) per pair, vectorised over the first pass
@@ -332,7 +332,7 @@ class CollisionModel:
         while stack:
             a, b, da, db, k = stack.pop()
             if checks > max_checks or b - a < 1e-9 * s_end:
-                return Clearance(False, level, contact(0, k, min(da, db), path([a])[0]), a,
+                return Clearance(False, level, contact(k, min(da, db), path([a])[0]), a,
                                  checks)
             m = 0.5 * (a + b)
             qm = path([m])[0]
@@ -343,12 +343,12 @@ class CollisionModel:
             if dm < worst[0]:
                 worst = (dm, m, k)
             if dm < level:
-                return Clearance(False, level, contact(0, k, dm, qm), m, checks)
+                return Clearance(False, level, contact(k, dm, qm), m, checks)
             for lo, hi, dl, dh in ((a, m, da, dm), (m, b, dm, db)):
                 v = slope(np.array([lo]), np.array([hi]))[0] @ rate[k] * (hi - lo)
                 if dl + dh - 2.0 * level < v:
                     stack.append((lo, hi, dl, dh, k))
-        return Clearance(True, level, contact(0, worst[2], worst[0], path([worst[1]])[0]),
+        return Clearance(True, level, contact(worst[2], worst[0], path([worst[1]])[0]),
                          worst[1], checks)
 
     # ------------------------------------------------------------------ internals

@@ -49,7 +49,7 @@ from .records import (
     SCPOptions,
     StopReason,
 )
-from .scp import path_through, sequential_convex
+from .scp import knot_breaks, path_through, sequential_convex
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -209,10 +209,7 @@ def plan(
         if np.any(np.all(np.diff(points, axis=0) == 0.0, axis=1)):
             raise ConfigurationError("two consecutive points (start, via-points, goal) are equal")
         k = max(options.control_points, 4 * (len(vias) + 1))
-        breaks = None
-        if options.knots == "clustered":
-            breaks = 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, k)[1:-1]))
-        start, sigma = path_through(points, k, breaks)
+        start, sigma = path_through(points, k, knot_breaks(options, k))
         line, via_s = start, tuple(float(x) for x in sigma)
     if collisions is not None:
         if vias and not collisions.path_clearance(line).certified:
@@ -221,10 +218,8 @@ def plan(
                 "via-points is not supported yet (add via-points that avoid them)"
             )
         if not vias and not collisions.path_clearance(line).certified:
-            breaks = None
             k = options.control_points
-            if options.knots == "clustered":
-                breaks = 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, k)[1:-1]))
+            breaks = knot_breaks(options, k)
             # a few OMPL paths (around the obstacles on different sides), the cheapest first
             starts = collision_free_path(
                 collisions, q0, qe, control_points=k, breaks=breaks, attempts=5,

@@ -56,7 +56,7 @@ if TYPE_CHECKING:
     from ..robot import Robot
     from ..timing import TimingResult
 
-__all__ = ["sequential_convex", "collision_rows", "path_through"]
+__all__ = ["sequential_convex", "collision_rows", "path_through", "knot_breaks"]
 
 
 def sequential_convex(
@@ -122,13 +122,11 @@ def sequential_convex(
     if weights is None:
         raise SolverError("sequential convex programming needs f0 = 1 + Σ w u² (a TorqueCost)")
     n, k_count = robot.n, options.control_points
-    breaks = None
     if start is not None:
         k_count = start.control_points.shape[0] - 2
         breaks = start.knots[4:-4] if k_count > 2 else None
-    elif options.knots == "clustered":  # where stage 1's grid is dense too: σ = ½(1 − cos πx)
-        breaks = 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, k_count)[1:-1]))
-    if start is None:
+    else:
+        breaks = knot_breaks(options, k_count)
         start = BSplinePath.line(q0, qe, k_count, breaks)
     ends = start.control_points[[0, -1]]
     iterate_grid = min(grid, max(options.grid, 4 * k_count))  # ≥ 4 segments per control point
@@ -254,6 +252,14 @@ def sequential_convex(
 ACTIVATION = 0.05
 """Pairs farther than the margin plus this from each other get no row in the model [m]
 (TrajOpt's distance-check threshold)."""
+
+
+def knot_breaks(options: SCPOptions, count: int) -> NDArray[np.float64] | None:
+    """The interior knots of a B-spline path with ``count`` interior control points: clustered
+    at the rest ends, where stage 1's grid is dense too (σ = ½(1 − cos πx)), or None (uniform)."""
+    if options.knots != "clustered":
+        return None
+    return 0.5 * (1.0 - np.cos(np.pi * np.linspace(0.0, 1.0, count)[1:-1]))
 
 
 def collision_rows(
