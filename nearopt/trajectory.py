@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
     from .path import Path
 
-__all__ = ["Trajectory", "Samples", "segment_times"]
+__all__ = ["Motion", "Trajectory", "Samples", "segment_times"]
 
 InverseDynamics = Callable[["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"],
                            "NDArray[np.float64]"]
@@ -62,89 +62,28 @@ def segment_times(s: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
     return 2.0 * np.diff(np.asarray(s, dtype=float)) / (lam[:-1] + lam[1:])
 
 
-class Trajectory:
-    """A path θ(s) followed with the speed profile b(s) = λ(s)², as a function of time.
+class Motion:
+    """What every timed motion offers on top of :meth:`states`, :attr:`t` (the times where the
+    acceleration may jump) and :attr:`duration`: values at times, torques, samples at a rate, its
+    phases and integrals (:class:`Trajectory`: one timed path)."""
 
-    Parameters
-    ----------
-    path
-        The spatial path θ(s).
-    s
-        Knots s_0 = 0 < … < s_N = s_e [unit of s], shape (N+1,).
-    b
-        λ² at the knots [(unit of s / s)²], ≥ 0, shape (N+1,); b > 0 at interior knots.
-    inverse_dynamics
-        u(θ, θ̇, θ̈) for arrays of shape (M, n) (e.g. ``Robot.inverse_dynamics_batch``).
-    """
-
-    def __init__(
-        self,
-        path: Path,
-        s: ArrayLike,
-        b: ArrayLike,
-        inverse_dynamics: InverseDynamics,
-    ) -> None:
-        s = np.asarray(s, dtype=float)
-        b = np.asarray(b, dtype=float)
-        if s.ndim != 1 or s.shape != b.shape or s.size < 2 or np.any(np.diff(s) <= 0):
-            raise ConfigurationError("knots s must increase strictly and match b in shape")
-        if np.any(b < 0) or not np.all(np.isfinite(b)) or np.any(b[1:-1] <= 0):
-            raise ConfigurationError("b must be finite, ≥ 0, and > 0 at interior knots")
-        self.path = path
-        self.s = s
-        self.b = b
-        self.lam = np.sqrt(b)
-        self.a = np.diff(b) / (2.0 * np.diff(s))
-        self.t = np.concatenate([[0.0], np.cumsum(segment_times(s, b))])
-        self._inverse_dynamics = inverse_dynamics
-        for arr in (self.s, self.b, self.lam, self.a, self.t):
-            arr.setflags(write=False)
+    t: NDArray[np.float64]
+    _inverse_dynamics: InverseDynamics
 
     @property
     def duration(self) -> float:
         """t_e, the time the motion takes [s]."""
         return float(self.t[-1])
 
-    @property
-    def dof(self) -> int:
-        """Number of joints n."""
-        return self.path.dof
-
-    def path_parameter(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
-        """s(t), ṡ(t) = λ, s̈(t) at the given times (clipped to [0, t_e]), each of shape (M,)."""
-        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
-        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, self.s.size - 2)
-        tau = t - self.t[k]
-        acc = self.a[k]
-        s = np.minimum(self.s[k] + self.lam[k] * tau + 0.5 * acc * tau**2, self.s[-1])
-        sd = np.maximum(self.lam[k] + acc * tau, 0.0)
-        return s, sd, acc
-
-    def time_at(self, s: ArrayLike) -> NDArray[np.float64]:
-        """t(s): when the motion reaches path parameters s ∈ [0, s_e] [s], shape (M,) (the
-        inverse of :meth:`path_parameter`, exact on each segment)."""
-        s = np.clip(np.atleast_1d(np.asarray(s, dtype=float)), 0.0, self.s[-1])
-        k = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.s.size - 2)
-        ds = s - self.s[k]
-        lam, acc = self.lam[k], self.a[k]
-        # s_k + λ τ + ½ a τ² = s: τ = 2 Δs / (λ + √(λ² + 2 a Δs)) (stable for a → 0 and λ = 0)
-        root = np.sqrt(np.maximum(lam**2 + 2.0 * acc * ds, 0.0))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            tau = np.where(ds > 0.0, 2.0 * ds / (lam + root), 0.0)
-        return self.t[k] + tau
+    def states(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:  # pragma: no cover
+        """θ(t), θ̇(t), θ̈(t) in one pass, each of shape (M, n)."""
+        raise NotImplementedError
 
     def __call__(self, t: ArrayLike, order: Literal[0, 1, 2] = 0) -> NDArray[np.float64]:
         """θ(t) (order 0), θ̇(t) (1) or θ̈(t) (2), shape (M, n); at a knot, the segment after it."""
         if order not in (0, 1, 2):
             raise ValueError(f"order must be 0, 1 or 2, got {order}")
         return self.states(t)[order]
-
-    def states(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
-        """θ(t), θ̇(t), θ̈(t) in one pass, each of shape (M, n)."""
-        s, sd, sdd = self.path_parameter(t)
-        d1 = self.path(s, 1)
-        qdd = self.path(s, 2) * (sd**2)[:, None] + d1 * sdd[:, None]
-        return self.path(s, 0), d1 * sd[:, None], qdd
 
     def torque(self, t: ArrayLike) -> NDArray[np.float64]:
         """u(t) by inverse dynamics (eq. 1) [N·m or N], shape (M, n)."""
@@ -229,6 +168,82 @@ class Trajectory:
             mid = 0.5 * (lo[bad] + hi[bad])
             lo, hi = np.concatenate([lo[bad], mid]), np.concatenate([mid, hi[bad]])
         return total
+
+
+class Trajectory(Motion):
+    """A path θ(s) followed with the speed profile b(s) = λ(s)², as a function of time.
+
+    Parameters
+    ----------
+    path
+        The spatial path θ(s).
+    s
+        Knots s_0 = 0 < … < s_N = s_e [unit of s], shape (N+1,).
+    b
+        λ² at the knots [(unit of s / s)²], ≥ 0, shape (N+1,); b > 0 at interior knots.
+    inverse_dynamics
+        u(θ, θ̇, θ̈) for arrays of shape (M, n) (e.g. ``Robot.inverse_dynamics_batch``).
+    """
+
+    def __init__(
+        self,
+        path: Path,
+        s: ArrayLike,
+        b: ArrayLike,
+        inverse_dynamics: InverseDynamics,
+    ) -> None:
+        s = np.asarray(s, dtype=float)
+        b = np.asarray(b, dtype=float)
+        if s.ndim != 1 or s.shape != b.shape or s.size < 2 or np.any(np.diff(s) <= 0):
+            raise ConfigurationError("knots s must increase strictly and match b in shape")
+        if np.any(b < 0) or not np.all(np.isfinite(b)) or np.any(b[1:-1] <= 0):
+            raise ConfigurationError("b must be finite, ≥ 0, and > 0 at interior knots")
+        self.path = path
+        self.s = s
+        self.b = b
+        self.lam = np.sqrt(b)
+        self.a = np.diff(b) / (2.0 * np.diff(s))
+        self.t = np.concatenate([[0.0], np.cumsum(segment_times(s, b))])
+        self._inverse_dynamics = inverse_dynamics
+        for arr in (self.s, self.b, self.lam, self.a, self.t):
+            arr.setflags(write=False)
+
+    @property
+    def dof(self) -> int:
+        """Number of joints n."""
+        return self.path.dof
+
+    def path_parameter(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """s(t), ṡ(t) = λ, s̈(t) at the given times (clipped to [0, t_e]), each of shape (M,)."""
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, self.s.size - 2)
+        tau = t - self.t[k]
+        acc = self.a[k]
+        s = np.minimum(self.s[k] + self.lam[k] * tau + 0.5 * acc * tau**2, self.s[-1])
+        sd = np.maximum(self.lam[k] + acc * tau, 0.0)
+        return s, sd, acc
+
+    def time_at(self, s: ArrayLike) -> NDArray[np.float64]:
+        """t(s): when the motion reaches path parameters s ∈ [0, s_e] [s], shape (M,) (the
+        inverse of :meth:`path_parameter`, exact on each segment)."""
+        s = np.clip(np.atleast_1d(np.asarray(s, dtype=float)), 0.0, self.s[-1])
+        k = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, self.s.size - 2)
+        ds = s - self.s[k]
+        lam, acc = self.lam[k], self.a[k]
+        # s_k + λ τ + ½ a τ² = s: τ = 2 Δs / (λ + √(λ² + 2 a Δs)) (stable for a → 0 and λ = 0)
+        root = np.sqrt(np.maximum(lam**2 + 2.0 * acc * ds, 0.0))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            tau = np.where(ds > 0.0, 2.0 * ds / (lam + root), 0.0)
+        return self.t[k] + tau
+
+    def states(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """θ(t), θ̇(t), θ̈(t) in one pass, each of shape (M, n)."""
+        s, sd, sdd = self.path_parameter(t)
+        d1 = self.path(s, 1)
+        qdd = self.path(s, 2) * (sd**2)[:, None] + d1 * sdd[:, None]
+        return self.path(s, 0), d1 * sd[:, None], qdd
+
+
 
 
 # Gauss-Kronrod 7/15 on [-1, 1] (QUADPACK's qk15): Kronrod nodes and weights, and the weights of
