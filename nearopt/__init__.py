@@ -18,6 +18,7 @@ from .errors import (
     SamplingWarning,
     SceneError,
     SolverError,
+    TaskError,
     UnreachablePoseError,
     URDFError,
 )
@@ -30,12 +31,16 @@ from .planning import (
     PlanResult,
     SCPOptions,
     StopReason,
+    Target,
+    Task,
+    TaskResult,
     plan,
+    plan_task,
 )
 from .robot import JointLimits, PathCoefficients, Robot
 from .timing import TimingResult, optimal_timing
-from .trajectory import Samples, Trajectory
-from .verify import VerificationError, VerificationReport, verify
+from .trajectory import ChainedTrajectory, Samples, Trajectory
+from .verify import VerificationError, VerificationReport, Waypoint, verify
 
 __all__ = [
     "Robot",
@@ -50,6 +55,10 @@ __all__ = [
     "optimal_timing",
     "plan",
     "PlanResult",
+    "plan_task",
+    "Target",
+    "Task",
+    "TaskResult",
     "Iteration",
     "Method",
     "StopReason",
@@ -57,10 +66,12 @@ __all__ = [
     "PaperOptions",
     "TimingResult",
     "Trajectory",
+    "ChainedTrajectory",
     "Samples",
     "verify",
     "VerificationReport",
     "VerificationError",
+    "Waypoint",
     "JointLimits",
     "PathCoefficients",
     "available_robots",
@@ -77,6 +88,7 @@ __all__ = [
     "SolverError",
     "CollisionError",
     "SceneError",
+    "TaskError",
     "UnreachablePoseError",
     "SamplingWarning",
 ]

@@ -2,6 +2,7 @@
 
     nearopt plan --robot two_link --q0 45 -90 --qe -90 0 --deg --beta 0.03 --json plan.json \
         --csv plan.csv --plots figures/ --html plan.html [--show]
+    nearopt plan --robot panda --task pick.toml --scene cell.toml --json task.json
     nearopt robots
 
 Every failure the user can cause (a bad argument, a bad URDF, an infeasible request) ends with one
@@ -21,6 +22,8 @@ import signal
 import sys
 import time
 import warnings
+from collections.abc import Callable
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
@@ -34,21 +37,24 @@ from .export import csv_text, json_text
 from .kinematics import ToolPose
 from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
 from .path import StraightPath
-from .planning import METHODS, Iteration, StopReason, plan
+from .planning import METHODS, Iteration, PlanResult, StopReason, Task, TaskResult, plan, plan_task
 from .robot import Robot
-from .verify import VerificationError, verify
+from .verify import VerificationError, VerificationReport, verify
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
 
-__all__ = ["main"]
+    from numpy.typing import NDArray
+
+__all__ = ["main", "parse_plan", "prepare", "solve", "check", "Prepared"]
 
 
 class _Parser(argparse.ArgumentParser):
-    """An argument parser whose errors are one line (no usage dump) with exit code 2."""
+    """An argument parser whose errors are ConfigurationErrors (one line, exit code 2, no usage
+    dump; a batch records them as the motion's error)."""
 
     def error(self, message: str) -> NoReturn:
-        _fail(message)
+        raise ConfigurationError(message)
 
 
 def _fail(message: str, code: int = 2) -> NoReturn:
@@ -84,7 +90,8 @@ def _parser() -> argparse.ArgumentParser:
                    help="joint speed limits [rad/s or m/s]: one value or one per joint")
     p.add_argument("--velocity-scale", type=float, metavar="F",
                    help="multiply every joint speed limit by F")
-    p.add_argument("--q0", nargs="+", type=float, required=True, metavar="V", help="start")
+    p.add_argument("--q0", nargs="+", type=float, metavar="V",
+                   help="start (required unless the --task file gives it; then this overrides it)")
     p.add_argument("--qe", nargs="+", type=float, metavar="V", help="goal")
     p.add_argument("--goal-pose", nargs="+", type=float, metavar="X",
                    help="goal as a tool pose instead of --qe: x y z [m] (position only) or "
@@ -94,6 +101,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--via", nargs="+", type=float, action="append", default=[], metavar="V",
                    help="a via-point passed through without stopping (joint values, like --q0); "
                         "repeat for several, in order")
+    p.add_argument("--task", metavar="FILE",
+                   help="a task (TOML): targets (joint values or tool poses) in order, each "
+                        "stopped at or passed through, planned as one motion (instead of --qe)")
     p.add_argument("--fixed-goal", action="store_true",
                    help="keep inverse kinematics' goal configuration (by default it moves along "
                         "the pose with the path, to lower J)")
@@ -183,14 +193,25 @@ def _check_request(args: argparse.Namespace) -> None:
             )
     if args.base and not args.tip:
         raise ConfigurationError("--base needs --tip: the chain goes from the base to the tip")
-    if (args.qe is None) == (args.goal_pose is None):
-        raise ConfigurationError("give the goal as --qe (joint values) or as --goal-pose, once")
+    if sum(x is not None for x in (args.qe, args.goal_pose, args.task)) != 1:
+        raise ConfigurationError(
+            "give the goal as --qe (joint values), as --goal-pose or as a --task file, once"
+        )
+    if args.task is not None and args.via:
+        raise ConfigurationError("--via applies to --qe or --goal-pose (a --task file lists its "
+                                 "targets, stop = false to pass through)")
+    if args.task is not None and args.frame:
+        raise ConfigurationError("--frame applies to --goal-pose (a --task file gives its frame)")
+    if args.task is None and args.q0 is None:
+        raise ConfigurationError("give the start configuration, --q0")
     if args.goal_pose is not None and len(args.goal_pose) not in (3, 7):
         raise ConfigurationError(
             f"--goal-pose takes x y z [m] or x y z qx qy qz qw, got {len(args.goal_pose)} numbers"
         )
-    if (args.frame or args.fixed_goal) and args.goal_pose is None:
-        raise ConfigurationError("--frame and --fixed-goal apply to --goal-pose")
+    if args.frame and args.goal_pose is None and args.task is None:
+        raise ConfigurationError("--frame applies to --goal-pose")
+    if args.fixed_goal and args.goal_pose is None and args.task is None:
+        raise ConfigurationError("--fixed-goal applies to --goal-pose or --task")
     if args.group and not args.urdf:
         raise ConfigurationError("--group applies to --urdf (a named robot chooses its own joints)")
     if args.group and not args.srdf:
@@ -224,17 +245,27 @@ def _lock_values(pairs: list[str]) -> dict[str, float]:
     return values
 
 
-def _robot(args: argparse.Namespace) -> Robot:
-    """The arm, with the limits the command line overrides."""
-    if args.robot:
-        robot = Robot.from_name(args.robot, **({"srdf": args.srdf} if args.srdf else {}))
-    else:
-        robot = Robot.from_urdf(
+RobotLoader = Callable[[tuple[object, ...], Callable[[], Robot]], Robot]
+
+
+def _robot(args: argparse.Namespace, loader: RobotLoader | None = None) -> Robot:
+    """The arm, with the limits the command line overrides; ``loader(key, load)`` may return a
+    robot loaded earlier for the same key (a batch worker keeps its robots)."""
+    single_effort = (args.effort_limit[0] if args.effort_limit and len(args.effort_limit) == 1
+                     else None)
+
+    def load() -> Robot:
+        if args.robot:
+            return Robot.from_name(args.robot, **({"srdf": args.srdf} if args.srdf else {}))
+        return Robot.from_urdf(
             args.urdf, locked_joints=tuple(args.lock), tip=args.tip, base=args.base,
             lock_at=_lock_values(args.lock_at), srdf=args.srdf, group=args.group,
-            effort_limit=args.effort_limit[0] if args.effort_limit and len(args.effort_limit) == 1
-            else None,
+            effort_limit=single_effort,
         )
+
+    key = (args.robot, args.urdf, tuple(args.lock), args.tip, args.base, args.srdf, args.group,
+           tuple(args.lock_at), None if args.robot else single_effort)
+    robot = load() if loader is None else loader(key, load)
     overrides = {}
     for option, key in (("effort_limit", "effort"), ("velocity_limit", "velocity"),
                         ("acceleration_limit", "acceleration")):
@@ -251,6 +282,118 @@ def _robot(args: argparse.Namespace) -> Robot:
     return robot.with_limits(**overrides) if overrides else robot
 
 
+def parse_plan(argv: Sequence[str]) -> argparse.Namespace:
+    """``nearopt plan`` arguments (``argv`` starts with ``"plan"``) as the command reads them.
+
+    Raises
+    ------
+    ConfigurationError
+        On an unknown option or a bad value.
+    """
+    args = _parser().parse_args(list(argv))
+    if args.command != "plan":
+        raise ConfigurationError(f"expected a plan request, got {args.command!r}")
+    return args
+
+
+@dataclass(frozen=True)
+class Prepared:
+    """A ``nearopt plan`` request read and checked: what to plan."""
+
+    robot: Robot
+    q0: NDArray[np.float64]
+    qe: NDArray[np.float64] | ToolPose | None
+    task: Task | None
+    scene: Scene | None
+    cost: Cost
+    via: list[NDArray[np.float64]]
+
+
+def prepare(args: argparse.Namespace, robot_loader: RobotLoader | None = None) -> Prepared:
+    """Check a request and load what it names (robot, task, scene) before any planning.
+
+    Raises
+    ------
+    NearoptError
+        On anything the request gets wrong (naming the option, joint, value and limit).
+    """
+    _check_request(args)
+    robot = _robot(args, robot_loader)
+    if args.weights is not None and len(args.weights) != robot.n:
+        raise ConfigurationError(
+            f"--weights needs one weight per joint of {robot.name} ({robot.n}), "
+            f"got {len(args.weights)}"
+        )
+    task = Task.from_file(args.task) if args.task is not None else None
+    if args.q0 is not None:
+        q0 = np.deg2rad(args.q0) if args.deg else np.asarray(args.q0)
+    elif task is not None and task.start is not None:
+        q0 = np.asarray(task.start)
+    else:
+        raise ConfigurationError(f"give the start configuration: --q0, or start = [...] in "
+                                 f"{args.task}")
+    qe: NDArray[np.float64] | ToolPose | None = None
+    if args.goal_pose is not None:
+        qe = ToolPose(args.goal_pose[:3], args.goal_pose[3:] or None, args.frame)
+        robot.frame_id(args.frame)  # an unknown frame is named before any work
+    elif args.qe is not None:
+        qe = np.deg2rad(args.qe) if args.deg else np.asarray(args.qe)
+    else:  # every frame of the task is named before any work
+        for target in task.targets:  # type: ignore[union-attr]
+            if isinstance(target.goal, ToolPose):
+                robot.frame_id(target.goal.frame)
+    scene = Scene.from_file(args.scene) if args.scene is not None else None
+    via = [np.deg2rad(v) if args.deg else np.asarray(v) for v in args.via]
+    return Prepared(robot, q0, qe, task, scene, _cost(args), via)
+
+
+def solve(
+    prepared: Prepared, args: argparse.Namespace,
+    callback: Callable[[Iteration], None] | None = None,
+    segment_callback: Callable[[int, Iteration], None] | None = None,
+) -> PlanResult | TaskResult:
+    """Plan the request: :func:`~nearopt.plan`, or :func:`~nearopt.plan_task` for a task."""
+    common = dict(
+        method=args.method,
+        grid=args.grid,
+        max_iterations=0 if args.stage1_only else args.max_iterations,
+        time_limit=args.time_limit,
+        velocity_limits=not args.no_velocity_limits,
+        position_limits=not args.no_position_limits,
+        scene=prepared.scene,
+        margin=args.margin,
+        self_collision=args.self_collision,
+        optimise_goal=not args.fixed_goal,
+    )
+    if prepared.task is not None:
+        return plan_task(prepared.robot, prepared.q0, prepared.task, prepared.cost,
+                         callback=segment_callback, **common)  # type: ignore[arg-type]
+    return plan(prepared.robot, prepared.q0, prepared.qe, prepared.cost, callback=callback,
+                via=prepared.via, **common)  # type: ignore[arg-type]
+
+
+def check(result: PlanResult | TaskResult, prepared: Prepared,
+          args: argparse.Namespace) -> VerificationReport:
+    """Verify a plan as the command does before writing it: at the controller's rate (never
+    more coarsely than 1 kHz), its start, goal (or goal pose), targets, limits, clearance, J."""
+    if args.rate * result.duration > MAX_SAMPLES:
+        raise ConfigurationError(
+            f"--rate {args.rate:g} Hz over te = {result.duration:.4g} s gives more than "
+            f"{MAX_SAMPLES:.0e} samples"
+        )
+    qe = prepared.qe
+    if prepared.task is not None:
+        last = prepared.task.targets[-1].goal
+        qe = last if isinstance(last, ToolPose) else np.asarray(last)
+    return verify(
+        result.trajectory, prepared.robot, rate=max(args.rate, 1000.0), q0=prepared.q0,
+        qe=None if isinstance(qe, ToolPose) else qe, goal_pose=result.goal, cost=result.cost,
+        J=result.J, velocity_limits=not args.no_velocity_limits,
+        position_limits=not args.no_position_limits, collisions=result.collisions,
+        waypoints=result.waypoints,
+    )
+
+
 def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     _check_request(args)
     # every output is checked before planning, so that a bad path costs no planning time
@@ -262,60 +405,40 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     outputs = check_outputs(roles)
     to_stdout = any(o.kind is OutputKind.STDOUT for o in outputs.values())
     out = sys.stderr if to_stdout else sys.stdout  # the standard output may carry a file
-    robot = _robot(args)
-    if args.weights is not None and len(args.weights) != robot.n:
-        raise ConfigurationError(
-            f"--weights needs one weight per joint of {robot.name} ({robot.n}), "
-            f"got {len(args.weights)}"
-        )
-    q0 = np.deg2rad(args.q0) if args.deg else np.asarray(args.q0)
-    if args.goal_pose is not None:
-        qe = ToolPose(args.goal_pose[:3], args.goal_pose[3:] or None, args.frame)
-        robot.frame_id(args.frame)  # an unknown frame is named before any work
-    else:
-        qe = np.deg2rad(args.qe) if args.deg else np.asarray(args.qe)
-    scene = Scene.from_file(args.scene) if args.scene is not None else None
+    prepared = prepare(args)
+    quiet = args.quiet or args.stage1_only
 
     def progress(entry: Iteration) -> None:
         print(_format(entry), file=out, flush=True)
 
+    def segment_progress(k: int, entry: Iteration) -> None:
+        print(f"segment {k + 1}  {_format(entry)}", file=out, flush=True)
+
     with interrupt.armed():
-        result = plan(
-            robot, q0, qe, _cost(args),
-            method=args.method,
-            grid=args.grid,
-            max_iterations=0 if args.stage1_only else args.max_iterations,
-            time_limit=args.time_limit,
-            velocity_limits=not args.no_velocity_limits,
-            position_limits=not args.no_position_limits,
-            callback=None if args.quiet or args.stage1_only else progress,
-            scene=scene,
-            margin=args.margin,
-            self_collision=args.self_collision,
-            optimise_goal=not args.fixed_goal,
-            via=[np.deg2rad(v) if args.deg else np.asarray(v) for v in args.via],
-        )
-    first = "straight line" if isinstance(result.initial.trajectory.path, StraightPath) else (
-        "first path, from OMPL")
-    print(f"{result.status}: J = {result.J:.6f} ({first} {result.initial.J:.6f}), "
-          f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
-          f"{result.wall_time:.2f} s ({result.message})", file=out)
+        result = solve(prepared, args, None if quiet else progress,
+                       None if quiet else segment_progress)
+    if isinstance(result, TaskResult):
+        print(f"{result.status}: J = {result.J:.6f} (first paths {result.initial_J:.6f}), "
+              f"te = {result.duration:.4f} s, {len(result.segments)} segments, "
+              f"{result.wall_time:.2f} s", file=out)
+        names = iter(t.name for t in result.targets)
+        for k, (t0, seg) in enumerate(zip(result.trajectory.starts, result.segments,
+                                          strict=True)):
+            to = ", ".join(next(names) for _ in range(len(seg.via) + 1))
+            print(f"  segment {k + 1} (to {to}): t = {t0:.4f}-{t0 + seg.duration:.4f} s, "
+                  f"J = {seg.J:.6f}, {len(seg.history) - 1} iterations, {seg.status} "
+                  f"({seg.message})", file=out)
+    else:
+        first = "straight line" if isinstance(result.initial.trajectory.path, StraightPath) else (
+            "first path, from OMPL")
+        print(f"{result.status}: J = {result.J:.6f} ({first} {result.initial.J:.6f}), "
+              f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
+              f"{result.wall_time:.2f} s ({result.message})", file=out)
     if result.clearance is not None:
         c = result.clearance
         print(f"clearance: closest {c.closest.pair} {c.closest.distance * 1e3:.1f} mm "
               f"(margin {c.level * 1e3:.1f} mm, certified along the whole path)", file=out)
-    if args.rate * result.duration > MAX_SAMPLES:
-        raise ConfigurationError(
-            f"--rate {args.rate:g} Hz over te = {result.duration:.4g} s gives more than "
-            f"{MAX_SAMPLES:.0e} samples"
-        )
-    # verified at the controller's rate, and never more coarsely than at 1 kHz
-    report = verify(
-        result.trajectory, robot, rate=max(args.rate, 1000.0), q0=q0,
-        qe=None if isinstance(qe, ToolPose) else qe, goal_pose=result.goal, cost=result.cost,
-        J=result.J, velocity_limits=not args.no_velocity_limits,
-        position_limits=not args.no_position_limits, collisions=result.collisions,
-    )
+    report = check(result, prepared, args)
     if args.verify:
         print(report, file=out)
     report.raise_if_failed()  # nothing is written for a motion that fails
@@ -411,9 +534,10 @@ class _Abort(BaseException):
 
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of the ``nearopt`` console script; returns the exit code."""
-    args = _parser().parse_args(argv)
     interrupt = _Interrupt()
+    args: argparse.Namespace | None = None
     try:
+        args = _parser().parse_args(argv)
         if args.command == "robots":
             print("\n".join(available_robots()))
             return 0

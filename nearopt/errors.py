@@ -145,6 +145,27 @@ class SceneError(ConfigurationError):
         self.field = field
 
 
+class TaskError(ConfigurationError):
+    """A task file or task record that cannot be used: a bad file, target or field.
+
+    Parameters
+    ----------
+    message
+        What is wrong, naming the file, the target and the field.
+    target
+        The target concerned (its name, or ``target <k>``), if one is.
+    field
+        The field concerned, if one is.
+    """
+
+    def __init__(
+        self, message: str, *, target: str | None = None, field: str | None = None
+    ) -> None:
+        super().__init__(message)
+        self.target = target
+        self.field = field
+
+
 class CollisionError(NearoptError):
     """A configuration or motion that collides (or comes closer than the margin), or no
     collision-free path found.

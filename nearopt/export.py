@@ -17,10 +17,11 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from .errors import SamplingWarning
+from .kinematics import ToolPose
 from .outputs import write_atomically
 
 if TYPE_CHECKING:
-    from .planning import PlanResult
+    from .planning import PlanResult, TaskResult
 
 __all__ = [
     "check_sampling",
@@ -34,7 +35,7 @@ __all__ = [
 KEYS = ("q", "qd", "qdd", "tau")
 
 
-def check_sampling(result: PlanResult, rate: float) -> str | None:
+def check_sampling(result: PlanResult | TaskResult, rate: float) -> str | None:
     """A warning (also issued as :class:`~nearopt.SamplingWarning`) if samples at ``rate`` [Hz]
     can miss a constant-acceleration phase of the motion, else None."""
     faithful = result.trajectory.faithful_rate()
@@ -49,16 +50,25 @@ def check_sampling(result: PlanResult, rate: float) -> str | None:
     return message
 
 
-def json_text(result: PlanResult, rate: float = 1000.0) -> str:
+def json_text(result: PlanResult | TaskResult, rate: float = 1000.0,
+              extra: dict[str, object] | None = None) -> str:
     """The plan as ``{"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
     "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists), and ``"via": [{"t",
     "q"}, …]`` when the motion passes via-points.
+
+    A task (:class:`~nearopt.TaskResult`) has, instead of ``"history"`` and ``"via"``,
+    ``"targets": [{"name", "t", "q", "stop", "pose"}, …]`` (``"pose"``: position and quaternion
+    (x, y, z, w), or null) and ``"segments": [{"t_start", "t_end", "J", "status", "targets",
+    "history"}, …]``: the rest-to-rest pieces, whose boundaries are the targets stopped at.
+
+    ``extra`` keys come first (a batch's ``"id"``, ``"request"`` and ``"batch"`` record).
 
     Warns (:class:`~nearopt.SamplingWarning`) if the rate is too low to resolve the motion.
     """
     check_sampling(result, rate)
     samples = result.trajectory.sample(rate)
-    document = {
+    document: dict[str, object] = {
+        **(extra or {}),
         "robot": result.robot.name,
         "joint_names": list(result.robot.joint_names),
         "cost": result.cost.describe(),
@@ -66,16 +76,41 @@ def json_text(result: PlanResult, rate: float = 1000.0) -> str:
         "duration": result.duration,
         "t": samples.t.tolist(),
         **{key: getattr(samples, key).tolist() for key in KEYS},
-        "history": [{"J": it.J, "alpha": it.alpha} for it in result.history],
     }
-    if result.via:  # where the motion passes its via-points (segment boundaries)
-        document["via"] = [{"t": float(t), "q": q.tolist()}
-                           for t, q in zip(result.via_times, result.via, strict=True)]
+    segments = getattr(result, "segments", None)
+    if segments is None:
+        document["history"] = [{"J": it.J, "alpha": it.alpha} for it in result.history]
+        if result.via:  # where the motion passes its via-points
+            document["via"] = [{"t": float(t), "q": q.tolist()}
+                               for t, q in zip(result.via_times, result.via, strict=True)]
+        return json.dumps(document)
+    document["targets"] = [
+        {"name": target.name, "t": float(t), "q": q.tolist(), "stop": target.stop,
+         "pose": _pose(target.goal)}
+        for target, t, q in zip(result.targets, result.target_times,
+                                result.target_configurations, strict=True)
+    ]
+    names = iter(t.name for t in result.targets)
+    document["segments"] = [
+        {"t_start": float(t0), "t_end": float(t0 + seg.duration), "J": seg.J,
+         "status": str(seg.status), "targets": [next(names) for _ in range(len(seg.via) + 1)],
+         "history": [{"J": it.J, "alpha": it.alpha} for it in seg.history]}
+        for t0, seg in zip(result.trajectory.starts, segments, strict=True)
+    ]
     return json.dumps(document)
 
 
-def csv_text(result: PlanResult, rate: float = 1000.0) -> str:
-    """The plan's samples as CSV: a header row ``t, q_<joint>…, qd_<joint>…, qdd_…, tau_…``.
+def _pose(goal: object) -> list[float] | None:
+    """A tool pose as [x, y, z] or [x, y, z, qx, qy, qz, qw]; None for a joint vector."""
+    if not isinstance(goal, ToolPose):
+        return None
+    return [float(x) for x in (*goal.position, *(goal.quaternion or ()))]
+
+
+def csv_text(result: PlanResult | TaskResult, rate: float = 1000.0) -> str:
+    """The plan's samples as CSV: a header row ``t, q_<joint>…, qd_<joint>…, qdd_…, tau_…``;
+    a task's has a last column ``segment`` (1, 2, …: the rest-to-rest piece a sample belongs
+    to; a sample on a stop belongs to the piece that starts there, the last to the last).
 
     Warns (:class:`~nearopt.SamplingWarning`) if the rate is too low to resolve the motion.
     """
@@ -84,18 +119,25 @@ def csv_text(result: PlanResult, rate: float = 1000.0) -> str:
     names = result.robot.joint_names
     header = ["t"] + [f"{key}_{name}" for key in KEYS for name in names]
     rows = np.column_stack([samples.t, *(getattr(samples, key) for key in KEYS)])
+    segments = getattr(result, "segments", None)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow(header)
-    writer.writerows([repr(float(x)) for x in row] for row in rows)
+    if segments is None:
+        writer.writerow(header)
+        writer.writerows([repr(float(x)) for x in row] for row in rows)
+    else:
+        part = result.trajectory.part_at(samples.t) + 1
+        writer.writerow([*header, "segment"])
+        writer.writerows([*(repr(float(x)) for x in row), str(k)]
+                         for row, k in zip(rows, part, strict=True))
     return buffer.getvalue()
 
 
-def write_json(result: PlanResult, path: str | Path, rate: float = 1000.0) -> Path:
+def write_json(result: PlanResult | TaskResult, path: str | Path, rate: float = 1000.0) -> Path:
     """Write :func:`json_text` to ``path`` (atomically)."""
     return write_atomically(path, json_text(result, rate))
 
 
-def write_csv(result: PlanResult, path: str | Path, rate: float = 1000.0) -> Path:
+def write_csv(result: PlanResult | TaskResult, path: str | Path, rate: float = 1000.0) -> Path:
     """Write :func:`csv_text` to ``path`` (atomically)."""
     return write_atomically(path, csv_text(result, rate))

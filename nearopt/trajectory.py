@@ -25,7 +25,7 @@ if TYPE_CHECKING:
 
     from .path import Path
 
-__all__ = ["Motion", "Trajectory", "Samples", "segment_times"]
+__all__ = ["Motion", "Trajectory", "ChainedTrajectory", "Samples", "segment_times"]
 
 InverseDynamics = Callable[["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"],
                            "NDArray[np.float64]"]
@@ -65,7 +65,8 @@ def segment_times(s: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
 class Motion:
     """What every timed motion offers on top of :meth:`states`, :attr:`t` (the times where the
     acceleration may jump) and :attr:`duration`: values at times, torques, samples at a rate, its
-    phases and integrals (:class:`Trajectory`: one timed path)."""
+    phases and integrals. :class:`Trajectory` (one timed path) and :class:`ChainedTrajectory`
+    (motions one after another) are motions."""
 
     t: NDArray[np.float64]
     _inverse_dynamics: InverseDynamics
@@ -244,6 +245,72 @@ class Trajectory(Motion):
         return self.path(s, 0), d1 * sd[:, None], qdd
 
 
+
+class ChainedTrajectory(Motion):
+    """Motions one after another, each from rest to rest: the whole motion of a task whose
+    targets the arm stops at (:func:`~nearopt.plan_task`).
+
+    Parameters
+    ----------
+    parts
+        The motions in order; each starts at rest where the previous one ends at rest.
+    joined
+        Check that each part starts where the previous one ends (False: pieces drawn side by
+        side, e.g. the first paths of a task's segments, which need not join where a goal
+        configuration moved along its pose).
+
+    Attributes
+    ----------
+    parts
+        The motions.
+    starts
+        When each part starts [s], shape (len(parts),) (the first at 0).
+    t
+        The times where the acceleration may jump: every part's knot times [s].
+    """
+
+    def __init__(self, parts: tuple[Motion, ...] | list[Motion], joined: bool = True) -> None:
+        parts = tuple(parts)
+        if not parts:
+            raise ConfigurationError("a chained trajectory needs at least one motion")
+        for before, after in zip(parts, parts[1:] if joined else (), strict=False):
+            qa, qb = before(before.duration, 0)[0], after(0.0, 0)[0]
+            if not np.allclose(qa, qb, rtol=0.0, atol=1e-9):
+                raise ConfigurationError(
+                    "each motion of a chained trajectory starts where the previous one ends "
+                    f"(a jump of {np.max(np.abs(qa - qb)):.3g} rad)"
+                )
+        self.parts = parts
+        durations = np.array([p.duration for p in parts])
+        self.starts = np.concatenate([[0.0], np.cumsum(durations)[:-1]])
+        self.t = np.unique(np.concatenate([p.t + t0 for p, t0 in zip(parts, self.starts,
+                                                                      strict=True)]))
+        self._inverse_dynamics = parts[0]._inverse_dynamics
+        for arr in (self.starts, self.t):
+            arr.setflags(write=False)
+
+    @property
+    def dof(self) -> int:
+        """Number of joints n."""
+        return int(self.parts[0](0.0, 0).shape[1])
+
+    def part_at(self, t: ArrayLike) -> NDArray[np.intp]:
+        """The index of the part each time lies in (a boundary: the part that starts there),
+        shape (M,)."""
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        return np.clip(np.searchsorted(self.starts, t, side="right") - 1, 0, len(self.parts) - 1)
+
+    def states(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """θ(t), θ̇(t), θ̈(t) in one pass, each of shape (M, n)."""
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        k = self.part_at(t)
+        out = tuple(np.empty((t.size, self.dof)) for _ in range(3))
+        for index in np.unique(k):
+            mask = k == index
+            for array, value in zip(out, self.parts[index].states(t[mask] - self.starts[index]),
+                                    strict=True):
+                array[mask] = value
+        return out
 
 
 # Gauss-Kronrod 7/15 on [-1, 1] (QUADPACK's qk15): Kronrod nodes and weights, and the weights of

@@ -25,9 +25,9 @@ if TYPE_CHECKING:
     from .cost import Cost
     from .kinematics import ToolPose
     from .robot import Robot
-    from .trajectory import Trajectory
+    from .trajectory import Motion, Trajectory
 
-__all__ = ["Check", "VerificationReport", "VerificationError", "verify"]
+__all__ = ["Check", "VerificationReport", "VerificationError", "Waypoint", "verify"]
 
 
 class VerificationError(NearoptError):
@@ -36,6 +36,17 @@ class VerificationError(NearoptError):
     def __init__(self, message: str, report: VerificationReport) -> None:
         super().__init__(message)
         self.report = report
+
+
+@dataclass(frozen=True)
+class Waypoint:
+    """A point a motion must reach: at ``time`` [s], the configuration ``q`` [rad or m] and/or
+    the frame of ``pose`` at its placement, at rest if ``stop``."""
+
+    time: float
+    q: ArrayLike | None = None
+    pose: ToolPose | None = None
+    stop: bool = False
 
 
 @dataclass(frozen=True)
@@ -124,7 +135,7 @@ def _where(t: NDArray, joints: list[str], index: tuple[int, int]) -> str:
 
 
 def verify(
-    trajectory: Trajectory,
+    trajectory: Motion,
     robot: Robot,
     *,
     rate: float = 1000.0,
@@ -143,6 +154,7 @@ def verify(
     simulate: bool = True,
     collisions: CollisionModel | None = None,
     goal_pose: ToolPose | None = None,
+    waypoints: tuple[Waypoint, ...] | list[Waypoint] = (),
 ) -> VerificationReport:
     """Check a motion at a controller rate, from the robot model alone.
 
@@ -187,6 +199,10 @@ def verify(
     goal_pose
         Check that the last sample puts the goal's frame at its placement, to ``end_tolerance``
         [m and rad].
+    waypoints
+        Points the motion must reach at given times (via-points, a task's targets): the
+        configuration and pose there to ``end_tolerance``, at rest (from both sides) where the
+        point is a stop.
     collisions
         Check the signed distance of every pair of this model at every sample against its margin
         (the report gives the closest pair, its distance and when) [m].
@@ -239,6 +255,8 @@ def verify(
         checks.append(Check("goal pose", max(distance, angle), end_tolerance, "m or rad",
                             f"{goal_pose.frame or robot.tip!r}: {distance:.2e} m, {angle:.2e} rad "
                             "from the target at t = te"))
+    if waypoints:
+        _check_waypoints(checks, trajectory, robot, waypoints, end_tolerance)
     rest = np.abs(qd[[0, -1]])
     k, i = np.unravel_index(np.argmax(rest), rest.shape)
     checks.append(Check("rest at both ends", float(rest[k, i]), end_tolerance, "rad/s",
@@ -271,6 +289,38 @@ def verify(
     checks.append(Check("simulation window defect", defect, 10 * simulation_tolerance,
                         "rad or rad/s", f"largest mismatch at the end of a {window:g} s window"))
     return VerificationReport(tuple(checks), float(rate), int(t.size))
+
+
+def _check_waypoints(
+    checks: list[Check], trajectory: Motion, robot: Robot, waypoints: tuple[Waypoint, ...] |
+    list[Waypoint], tolerance: float,
+) -> None:
+    """Append the waypoint checks: configuration, pose and rest at each waypoint's time."""
+    from .kinematics import pose_error
+
+    names = list(robot.joint_names)
+    t = np.array([w.time for w in waypoints], dtype=float)
+    q_at, qd_at, _ = trajectory.states(t)
+    qd_before = trajectory.states(np.maximum(t - 1e-12 * max(1.0, trajectory.duration), 0.0))[1]
+    misses = [(float(np.max(np.abs(q_at[k] - robot.check_configuration(w.q, "waypoint")))), k)
+              for k, w in enumerate(waypoints) if w.q is not None]
+    if misses:
+        worst, k = max(misses)
+        checks.append(Check("via-point positions", worst, tolerance, "rad",
+                            f"waypoint {k + 1} at t = {t[k]:.6g} s"))
+    poses = [(max(pose_error(robot, q_at[k], w.pose)), k)
+             for k, w in enumerate(waypoints) if w.pose is not None]
+    if poses:
+        worst, k = max(poses)
+        checks.append(Check("via-point poses", worst, tolerance, "m or rad",
+                            f"waypoint {k + 1} at t = {t[k]:.6g} s"))
+    stops = [k for k, w in enumerate(waypoints) if w.stop]
+    if stops:
+        speed = np.maximum(np.abs(qd_at[stops]), np.abs(qd_before[stops]))
+        k, i = np.unravel_index(np.argmax(speed), speed.shape)
+        checks.append(Check("rest at stops", float(speed[k, i]), tolerance, "rad/s",
+                            f"waypoint {stops[k] + 1} at t = {t[stops[k]]:.6g} s, joint "
+                            f"{names[i]!r}"))
 
 
 def _simpson_nodes(

@@ -3,7 +3,7 @@
 ``records`` holds the methods, their options and what a plan returns; ``linearisation`` stage 1's
 rows as functions of the path; ``scp`` the default path update (sequential convex programming);
 ``paper`` the paper's own update (torque gradient, improved torques, boundary-value problem);
-``planner`` the loop of Section 6, :func:`plan`.
+``planner`` the loop of Section 6, :func:`plan`; ``task`` a sequence of targets, :func:`plan_task`.
 """
 
 from .linearisation import PathBasis, path_basis, row_path_jacobian
@@ -19,9 +19,14 @@ from .records import (
     StopReason,
 )
 from .scp import sequential_convex
+from .task import Target, Task, TaskResult, plan_task
 
 __all__ = [
     "plan",
+    "plan_task",
+    "Target",
+    "Task",
+    "TaskResult",
     "METHODS",
     "MAX_CONTROL_POINTS",
     "Method",

@@ -213,10 +213,10 @@ def plan(
         line, via_s = start, tuple(float(x) for x in sigma)
     if collisions is not None:
         if vias and not collisions.path_clearance(line).certified:
-            raise CollisionError(
-                "the first path through the via-points collides; planning around obstacles with "
-                "via-points is not supported yet (add via-points that avoid them)"
-            )
+            start, sigma = _around_obstacles(
+                collisions, points, options,
+                min(max(0.25 * (t_start + time_limit - time.perf_counter()), 1e-3), 5.0))
+            line, via_s = start, tuple(float(x) for x in sigma)
         if not vias and not collisions.path_clearance(line).certified:
             k = options.control_points
             breaks = knot_breaks(options, k)
@@ -311,6 +311,42 @@ def plan(
         goal=goal,
         via=tuple(vias),
         via_s=via_s,
+    )
+
+
+def _around_obstacles(
+    collisions: CollisionModel, points: NDArray[np.float64], options: SCPOptions,
+    time_limit: float,
+) -> tuple[BSplinePath, NDArray[np.float64]]:
+    """A first path through via-points whose straight legs collide: each colliding leg is an
+    OMPL path (RRT-Connect, certified, fitted), the legs joined into one polyline and the
+    B-spline along it through the via-points exactly; certified, with more control points if
+    the first does not keep the margin. Returns it and the σ of the via-points."""
+    legs = len(points) - 1
+    polyline, exact = [points[:1]], []
+    for a, b in zip(points[:-1], points[1:], strict=True):
+        if collisions.path_clearance(StraightPath(a, b)).certified:
+            piece = b[None, :]
+        else:
+            found = collision_free_path(
+                collisions, a, b, control_points=options.control_points, breaks=None,
+                time_limit=time_limit / legs, attempts=1,
+            )
+            piece = found[0](np.linspace(0.0, 1.0, 4 * options.control_points + 1)[1:], 0)
+        polyline.append(piece)
+        exact.append(sum(len(p) for p in polyline) - 1)
+    dense = np.vstack(polyline)
+    k0 = max(options.control_points, 4 * legs)
+    for k in (k0, 2 * k0, 4 * k0, 8 * k0):
+        if k > MAX_CONTROL_POINTS:
+            break
+        path, sigma = path_through(dense, k, knot_breaks(options, k) if k == k0 else None,
+                                   exact=exact[:-1])
+        if collisions.path_clearance(path).certified:
+            return path, sigma
+    raise CollisionError(
+        "no B-spline through the via-points keeps the margin along the collision-free legs "
+        f"OMPL found (tried up to {min(8 * k0, MAX_CONTROL_POINTS)} control points)"
     )
 
 

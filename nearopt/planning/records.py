@@ -22,6 +22,7 @@ if TYPE_CHECKING:
     from ..robot import Robot
     from ..timing import TimingResult
     from ..trajectory import Trajectory
+    from ..verify import Waypoint
 
 __all__ = [
     "Method",
@@ -231,6 +232,23 @@ class PlanResult:
     def via_times(self) -> NDArray[np.float64]:
         """When the motion passes each via-point [s], shape (len(via),)."""
         return self.trajectory.time_at(np.asarray(self.via_s, dtype=float))
+
+    @property
+    def waypoints(self) -> tuple[Waypoint, ...]:
+        """The via-points as :func:`~nearopt.verify` checks them (passed, not stopped at)."""
+        from ..verify import Waypoint
+
+        return tuple(Waypoint(float(t), q) for t, q in zip(self.via_times, self.via, strict=True))
+
+    @property
+    def initial_trajectory(self) -> Trajectory:
+        """The first path (the straight line, or OMPL's) timed by stage 1."""
+        return self.initial.trajectory
+
+    @property
+    def initial_J(self) -> float:  # noqa: N802 - the paper's name
+        """J of :attr:`initial_trajectory` (the paper's J^0)."""
+        return self.initial.J
 
     @property
     def trajectory(self) -> Trajectory:

@@ -33,7 +33,7 @@ iteration / time budget.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
@@ -334,32 +334,38 @@ def _onto(robot: Robot, goal: ToolPose, q: NDArray[np.float64]) -> NDArray[np.fl
 
 def path_through(
     points: NDArray[np.float64], interior: int, breaks: NDArray[np.float64] | None = None,
+    exact: Sequence[int] | None = None,
 ) -> tuple[BSplinePath, NDArray[np.float64]]:
-    """A B-spline from ``points[0]`` to ``points[-1]`` through the points between, exactly,
-    and the σ where it passes them (by joint-space arc length along the polyline).
+    """A B-spline from ``points[0]`` to ``points[-1]`` along the polyline through ``points``,
+    through the points ``exact`` exactly, and the σ where it passes them (by joint-space arc
+    length along the polyline).
 
     The control points lie on the polyline at their Greville abscissae, then move by the least
-    change that puts θ(σ_v) on each via-point exactly.
+    change that puts θ(σ_v) on each exact point.
 
     Parameters
     ----------
     points
-        Start, via-points, goal [rad or m], shape (m + 2, n).
+        The polyline: start, …, goal [rad or m], shape (m + 2, n).
     interior
-        Interior control points K (≥ m).
+        Interior control points K (≥ the exact points).
     breaks
         Interior knots (default uniform).
+    exact
+        Indices of the points the path passes exactly (default: every point between the ends).
     """
     from ..collision.sampling import fit_polyline
 
     arc = np.concatenate([[0.0], np.cumsum(np.linalg.norm(np.diff(points, axis=0), axis=1))])
-    sigma = arc[1:-1] / arc[-1]
+    index = np.arange(1, len(points) - 1) if exact is None else np.asarray(exact, dtype=int)
+    sigma = arc[index] / arc[-1]
     spline = fit_polyline(points, interior, breaks)
     control = spline.control_points.copy()
-    basis = spline.basis(sigma)
-    inner = basis[:, 1:-1]
-    miss = points[1:-1] - basis @ control  # (m, n)
-    control[1:-1] += inner.T @ np.linalg.solve(inner @ inner.T, miss)
+    if index.size:
+        basis = spline.basis(sigma)
+        inner = basis[:, 1:-1]
+        miss = points[index] - basis @ control  # (m, n)
+        control[1:-1] += inner.T @ np.linalg.solve(inner @ inner.T, miss)
     return BSplinePath(control, breaks), sigma
 
 

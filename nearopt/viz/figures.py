@@ -21,7 +21,7 @@ import numpy as np
 
 from ..errors import ConfigurationError
 from ..outputs import write_atomically
-from .geometry import chain_points, plane_axes, tip_path
+from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -29,9 +29,9 @@ if TYPE_CHECKING:
 
     from ..collision import Scene
     from ..kinematics import ToolPose
-    from ..planning import PlanResult
+    from ..planning import PlanResult, TaskResult
     from ..robot import Robot
-    from ..trajectory import Trajectory
+    from ..trajectory import ChainedTrajectory, Trajectory
 
 __all__ = [
     "plot_torques",
@@ -65,10 +65,12 @@ def _joint_panels(
     limits: tuple[NDArray[np.float64], NDArray[np.float64]],
     quantity: tuple[str, str, str],
     title: str,
+    stops: NDArray[np.float64] | None = None,
 ) -> Figure:
     """One panel per joint: values[:, i] against t and its limits (dashed), a shared legend.
 
-    ``quantity`` is (symbol, unit of a revolute joint, unit of a prismatic joint).
+    ``quantity`` is (symbol, unit of a revolute joint, unit of a prismatic joint); ``stops``
+    the times where a task's arm stops at a target (dotted grey lines).
     """
     plt = _pyplot()
     n = robot.n
@@ -77,6 +79,9 @@ def _joint_panels(
     symbol, rot_unit, lin_unit = quantity
     for i, ax in enumerate(axes[:, 0]):
         ax.plot(t, values[:, i], color="C0", linewidth=1.4, label=f"{symbol} (plan)")
+        for k, stop in enumerate(() if stops is None else stops):
+            ax.axvline(stop, color="0.5", linestyle=":", linewidth=1,
+                       label="stop at a target" if k == 0 else "_nolegend_")
         for k, limit in enumerate((limits[0][i], limits[1][i])):
             if np.isfinite(limit):
                 ax.axhline(limit, color="C3", linestyle="--", linewidth=1,
@@ -99,6 +104,12 @@ def _joint_panels(
     return fig
 
 
+def _stops(trajectory: Trajectory | ChainedTrajectory) -> NDArray[np.float64] | None:
+    """The times where a chained motion (a task) stops between its parts, else None."""
+    starts = getattr(trajectory, "starts", None)
+    return None if starts is None else np.asarray(starts[1:])
+
+
 def plot_torques(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> Figure:
     """u_i(t) of a motion, one panel per joint, with its effort limits (Figs. 6-8).
 
@@ -118,6 +129,7 @@ def plot_torques(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> 
         robot, samples.t, samples.tau, (lim.effort_lower, lim.effort_upper),
         ("u", "N·m", "N"),
         f"{robot.name}: actuator torques and limits (te = {trajectory.duration:.4f} s)",
+        _stops(trajectory),
     )
 
 
@@ -139,6 +151,7 @@ def plot_speeds(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> F
     return _joint_panels(
         robot, samples.t, samples.qd, (-v, v), ("θ̇", "rad/s", "m/s"),
         f"{robot.name}: joint speeds and limits (te = {trajectory.duration:.4f} s)",
+        _stops(trajectory),
     )
 
 
@@ -150,6 +163,7 @@ def plot_accelerations(robot: Robot, trajectory: Trajectory, rate: float = 2000.
     return _joint_panels(
         robot, samples.t, samples.qdd, (-a, a), ("θ̈", "rad/s²", "m/s²"),
         f"{robot.name}: joint accelerations and limits (te = {trajectory.duration:.4f} s)",
+        _stops(trajectory),
     )
 
 
@@ -289,7 +303,7 @@ def _hull(points: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def plot_history(
-    result: PlanResult,
+    result: PlanResult | TaskResult,
     reference: dict[int, float] | None = None,
     reference_label: str = "paper, Table 2",
 ) -> Figure:
@@ -306,9 +320,19 @@ def plot_history(
     """
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 4))
-    j = [it.index for it in result.history]
-    label = f"nearopt ({result.method})"
-    ax.plot(j, [it.J for it in result.history], "-o", markersize=3, label=label)
+    segments = getattr(result, "segments", None)
+    if segments is None:
+        j = [it.index for it in result.history]
+        label = f"nearopt ({result.method})"
+        ax.plot(j, [it.J for it in result.history], "-o", markersize=3, label=label)
+    else:  # a task: one line per rest-to-rest segment
+        names = iter(t.name for t in result.targets)
+        j = []
+        for k, seg in enumerate(segments):
+            to = [next(names) for _ in range(len(seg.via) + 1)]
+            j = max(j, [it.index for it in seg.history], key=len)
+            ax.plot([it.index for it in seg.history], [it.J for it in seg.history], "-o",
+                    markersize=3, label=f"segment {k + 1} (to {to[-1]})")
     if reference:
         ax.plot(list(reference), list(reference.values()), "s", color="C1",
                 label=reference_label)
@@ -316,13 +340,16 @@ def plot_history(
     ax.set_ylabel("$J^j$")
     ax.grid(alpha=0.3)
     ax.legend()
-    ax.set_title(f"{result.robot.name}: $J$ = {result.J:.6f} after {len(j) - 1} iterations")
+    if segments is None:
+        ax.set_title(f"{result.robot.name}: $J$ = {result.J:.6f} after {len(j) - 1} iterations")
+    else:
+        ax.set_title(f"{result.robot.name}: $J$ = {result.J:.6f} over {len(segments)} segments")
     fig.tight_layout()
     return fig
 
 
 def render_figures(
-    result: PlanResult, reference: dict[int, float] | None = None
+    result: PlanResult | TaskResult, reference: dict[int, float] | None = None
 ) -> dict[str, bytes]:
     """torques.png, speeds.png (accelerations.png if the robot has acceleration limits),
     workspace.png and history.png of a plan, as PNG bytes by file name."""
@@ -335,9 +362,9 @@ def render_figures(
     if np.any(np.isfinite(robot.limits.acceleration)):
         figures["accelerations.png"] = plot_accelerations(robot, traj)
     figures["workspace.png"] = plot_workspace(
-        robot, {"initial": result.initial.trajectory, "final": traj},
+        robot, {"initial": result.initial_trajectory, "final": traj},
         scene=None if result.collisions is None else result.collisions.scene,
-        targets=() if result.goal is None else (result.goal,),
+        targets=target_poses(result),
     )
     figures["history.png"] = plot_history(result, reference)
     rendered = {}
@@ -350,7 +377,7 @@ def render_figures(
 
 
 def save_figures(
-    result: PlanResult, folder: str | Path, reference: dict[int, float] | None = None
+    result: PlanResult | TaskResult, folder: str | Path, reference: dict[int, float] | None = None
 ) -> list[Path]:
     """Write the figures of :func:`render_figures` for a plan into ``folder`` (made if it is
     missing, with its parents).

@@ -10,10 +10,36 @@ import numpy as np
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
+    from ..kinematics import ToolPose
+    from ..planning import PlanResult, TaskResult
     from ..robot import Robot
     from ..trajectory import Trajectory
 
-__all__ = ["plane_axes", "tip_path", "chain_points"]
+__all__ = ["plane_axes", "tip_path", "chain_points", "target_poses"]
+
+
+def target_poses(result: PlanResult | TaskResult) -> tuple[ToolPose, ...]:
+    """The placements a plan was asked to reach, in order: its via-points (a task: its
+    targets) and its goal pose. A tool-pose target as given; a joint-vector via-point or target
+    as the tip's placement there (the goal as joint values is not marked: it is the end pose)."""
+    import pinocchio as pin
+
+    from ..kinematics import ToolPose
+
+    robot = result.robot
+
+    def at(q: NDArray[np.float64]) -> ToolPose:
+        m = robot.frame_placement(q)
+        quat = pin.Quaternion(m.rotation)
+        return ToolPose(m.translation, (quat.x, quat.y, quat.z, quat.w))
+
+    targets = getattr(result, "targets", None)
+    if targets is not None:  # a task: every target but a last one given as joint values
+        out = [t.goal if isinstance(t.goal, ToolPose) else at(q)
+               for t, q in zip(targets, result.target_configurations, strict=True)]
+        return tuple(out if isinstance(targets[-1].goal, ToolPose) else out[:-1])
+    out = [at(q) for q in result.via]
+    return (*out, result.goal) if result.goal is not None else tuple(out)
 
 
 def chain_points(robot: Robot, q: NDArray[np.float64]) -> NDArray[np.float64]:

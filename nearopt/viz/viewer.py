@@ -43,12 +43,12 @@ from ..collision.scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sp
 from ..errors import ConfigurationError, NearoptError
 from ..kinematics import ToolPose
 from ..outputs import write_atomically
-from .geometry import chain_points, plane_axes, tip_path
+from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
-    from ..planning import PlanResult
+    from ..planning import PlanResult, TaskResult
     from ..robot import Robot
     from ..trajectory import Trajectory
 
@@ -414,7 +414,7 @@ def scene_html(
     return recorder.html()
 
 
-def export_html(result: PlanResult, path: str | Path, fps: float = 60.0) -> Path:
+def export_html(result: PlanResult | TaskResult, path: str | Path, fps: float = 60.0) -> Path:
     """Write the plan's animation (and the straight line's tip trail) as a standalone HTML file.
 
     Returns
@@ -425,17 +425,17 @@ def export_html(result: PlanResult, path: str | Path, fps: float = 60.0) -> Path
     return write_atomically(path, plan_html(result, fps))
 
 
-def plan_html(result: PlanResult, fps: float = 60.0) -> str:
+def plan_html(result: PlanResult | TaskResult, fps: float = 60.0) -> str:
     """:func:`scene_html` of a plan, with the first path's tip trail and the obstacles."""
-    return scene_html(result.robot, result.trajectory, result.initial.trajectory, fps,
+    return scene_html(result.robot, result.trajectory, result.initial_trajectory, fps,
                       _scene_of(result), _targets_of(result))
 
 
-def _targets_of(result: PlanResult) -> tuple[ToolPose, ...]:
-    return () if result.goal is None else (result.goal,)
+def _targets_of(result: PlanResult | TaskResult) -> tuple[ToolPose, ...]:
+    return target_poses(result)
 
 
-def _scene_of(result: PlanResult) -> Scene | None:
+def _scene_of(result: PlanResult | TaskResult) -> Scene | None:
     return None if result.collisions is None else result.collisions.scene
 
 
@@ -503,7 +503,9 @@ class LiveViewer:
         self.close()
 
 
-def show(result: PlanResult, fps: float = 60.0, open_browser: bool = False) -> LiveViewer:
+def show(
+    result: PlanResult | TaskResult, fps: float = 60.0, open_browser: bool = False
+) -> LiveViewer:
     """Play a plan in a browser through a meshcat server listening on 127.0.0.1 only.
 
     Parameters
@@ -522,7 +524,7 @@ def show(result: PlanResult, fps: float = 60.0, open_browser: bool = False) -> L
     """
     viewer = LiveViewer()
     try:
-        _draw(viewer.visualizer, result.robot, result.trajectory, result.initial.trajectory, fps,
+        _draw(viewer.visualizer, result.robot, result.trajectory, result.initial_trajectory, fps,
               _scene_of(result), _targets_of(result))
     except BaseException:
         viewer.close()

@@ -1,0 +1,462 @@
+"""Tasks: a sequence of targets (joint vectors or tool poses), passed through or stopped at.
+
+A task is planned as rest-to-rest segments: a segment ends at every target the arm stops at, and
+the targets it passes through on the way are the segment's via-points (:func:`~nearopt.plan`'s
+``via``, exact at every iterate). Segments between stops are independent given the stop
+configurations (the arm is at rest there), so the task's J is the sum of the segments' and each
+segment is planned (and its tool-pose goal optimised along the pose) in turn, from where the
+previous one ended.
+
+A task file (TOML; joint values in ``units``, poses in metres and a quaternion (x, y, z, w) in
+the base frame)::
+
+    start = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]   # optional: θ0 (the CLI's --q0)
+    units = "rad"                      # or "deg": of start and every q
+    frame = "panda_hand_tcp"           # optional: the frame the poses place (default: the tip)
+    [[target]]
+    name = "approach"
+    pose = [0.5, -0.3, 0.25, 1.0, 0.0, 0.0, 0.0]   # x y z [m] (position only) or x y z qx qy qz qw
+    stop = false                       # pass through (default: stop)
+    [[target]]
+    name = "pick"
+    pose = [0.5, -0.3, 0.12, 1.0, 0.0, 0.0, 0.0]
+    [[target]]
+    name = "home"
+    q = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
+"""
+
+from __future__ import annotations
+
+import math
+import time
+import tomllib
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..collision import Clearance, CollisionModel, Scene
+from ..cost import Cost, TimeCost
+from ..errors import ConfigurationError, NearoptError, TaskError
+from ..kinematics import ToolPose
+from ..robot import Robot
+from ..trajectory import ChainedTrajectory
+from ..verify import Waypoint
+from .planner import _collision_model, plan
+from .records import Iteration, Method, PaperOptions, PlanResult, SCPOptions, StopReason
+
+if TYPE_CHECKING:
+    from numpy.typing import ArrayLike, NDArray
+
+__all__ = ["Target", "Task", "TaskResult", "plan_task"]
+
+
+@dataclass(frozen=True)
+class Target:
+    """One target of a task.
+
+    Attributes
+    ----------
+    goal
+        A joint vector [rad or m], shape (n,), or a :class:`~nearopt.ToolPose` (inverse
+        kinematics from the previous target).
+    stop
+        The arm comes to rest there (a segment ends); False: it passes through without stopping.
+        The last target of a task is always a stop.
+    name
+        A label for reports and files (default ``target <k>``, from 1).
+    """
+
+    goal: ArrayLike | ToolPose
+    stop: bool = True
+    name: str | None = None
+
+
+@dataclass(frozen=True)
+class Task:
+    """A sequence of targets for one robot, and optionally where it starts.
+
+    Attributes
+    ----------
+    targets
+        The targets in order.
+    start
+        θ0 [rad or m], shape (n,), or None (given to :func:`plan_task` instead).
+    source
+        The file it was read from, if any.
+    """
+
+    targets: tuple[Target, ...]
+    start: tuple[float, ...] | None = None
+    source: Path | None = None
+
+    @classmethod
+    def from_file(cls, path: str | Path) -> Task:
+        """Read a task from a TOML file (see the module docstring).
+
+        Raises
+        ------
+        TaskError
+            A missing or malformed file, an unknown field, a bad value; the message names the
+            file, the target and the field.
+        """
+        if not isinstance(path, str | Path) or not str(path):
+            raise TaskError(f"a task file is a path, got {path!r}")
+        path = Path(path).expanduser().resolve()
+        try:
+            data = tomllib.loads(path.read_text(encoding="utf-8"))
+        except OSError as exc:
+            raise TaskError(f"cannot read the task file {path}: {exc.strerror or exc}") from None
+        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+            raise TaskError(f"the task file {path} is not valid TOML: {exc}") from None
+        fields = {"start", "units", "frame", "target"}
+        unknown = sorted(set(data) - fields)
+        if unknown:
+            raise TaskError(f"{path}: unknown field {unknown[0]!r} (the fields are start, units, "
+                            "frame and [[target]] tables)", field=unknown[0])
+        units = data.get("units", "rad")
+        if units not in ("rad", "deg"):
+            raise TaskError(f"{path}: units must be 'rad' or 'deg', got {units!r}", field="units")
+        scale = math.pi / 180.0 if units == "deg" else 1.0
+        frame = data.get("frame")
+        if frame is not None and not (isinstance(frame, str) and frame):
+            raise TaskError(f"{path}: frame must be a frame's name, got {frame!r}", field="frame")
+        start = None
+        if "start" in data:
+            start = tuple(x * scale for x in _numbers(data["start"], path, "start", None, None))
+        entries = data.get("target", [])
+        if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+            raise TaskError(f"{path}: targets are [[target]] tables", field="target")
+        if not entries:
+            raise TaskError(f"{path}: the task has no [[target]]", field="target")
+        targets = []
+        for number, entry in enumerate(entries, start=1):
+            name = entry.get("name", f"target {number}")
+            if not isinstance(name, str) or not name:
+                raise TaskError(f"{path}: target {number}: name must be a non-empty string, got "
+                                f"{name!r}", target=f"target {number}", field="name")
+            unknown = sorted(set(entry) - {"name", "q", "pose", "stop", "frame"})
+            if unknown:
+                raise TaskError(f"{path}: target {name!r}: unknown field {unknown[0]!r} (the "
+                                "fields are name, q or pose, frame, stop)", target=name,
+                                field=unknown[0])
+            kinds = [k for k in ("q", "pose") if k in entry]
+            if len(kinds) != 1:
+                raise TaskError(f"{path}: target {name!r}: give its joint values q or its pose, "
+                                f"once (got {', '.join(kinds) or 'neither'})", target=name,
+                                field="q")
+            stop = entry.get("stop", True)
+            if not isinstance(stop, bool):
+                raise TaskError(f"{path}: target {name!r}: stop must be true or false, got "
+                                f"{stop!r}", target=name, field="stop")
+            target_frame = entry.get("frame", frame)
+            if target_frame is not None and not (isinstance(target_frame, str) and target_frame):
+                raise TaskError(f"{path}: target {name!r}: frame must be a frame's name, got "
+                                f"{target_frame!r}", target=name, field="frame")
+            if "q" in entry:
+                if "frame" in entry:
+                    raise TaskError(f"{path}: target {name!r}: frame applies to a pose",
+                                    target=name, field="frame")
+                goal: object = np.array(_numbers(entry["q"], path, "q", name, None)) * scale
+            else:
+                values = _numbers(entry["pose"], path, "pose", name, (3, 7))
+                try:
+                    goal = ToolPose(values[:3], values[3:] or None, target_frame)
+                except ConfigurationError as exc:
+                    raise TaskError(f"{path}: target {name!r}: {exc}", target=name,
+                                    field="pose") from None
+            targets.append(Target(goal, stop, name))  # type: ignore[arg-type]
+        return cls(tuple(targets), start, path)
+
+
+def _numbers(value: object, path: Path, field: str, target: str | None,
+             sizes: tuple[int, ...] | None) -> list[float]:
+    """A TOML array of finite numbers (of one of ``sizes``), else a TaskError."""
+    where = f"{path}: " + (f"target {target!r}: " if target else "")
+    if not isinstance(value, list) or not all(
+        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+        for x in value
+    ) or not value:
+        raise TaskError(f"{where}{field} must be an array of finite numbers, got {value!r:.80}",
+                        target=target, field=field)
+    if sizes is not None and len(value) not in sizes:
+        raise TaskError(f"{where}{field} takes x y z [m] or x y z qx qy qz qw, got "
+                        f"{len(value)} numbers", target=target, field=field)
+    return [float(x) for x in value]
+
+
+@dataclass(frozen=True)
+class TaskResult:
+    """A planned task: its segments one after another.
+
+    Attributes
+    ----------
+    robot
+        The arm.
+    targets
+        The task's targets, as given (names filled in).
+    segments
+        One plan per rest-to-rest segment, in order.
+    trajectory
+        The whole motion: the segments' trajectories one after another.
+    status
+        :attr:`StopReason.INTERRUPTED` if a segment was interrupted, else the least settled of
+        the segments' reasons.
+    message
+        Every segment's message.
+    wall_time
+        Seconds spent in total.
+    """
+
+    robot: Robot
+    targets: tuple[Target, ...]
+    segments: tuple[PlanResult, ...]
+    trajectory: ChainedTrajectory
+    status: StopReason
+    message: str
+    wall_time: float
+
+    @property
+    def J(self) -> float:  # noqa: N802 - the paper's name
+        """∫ f0 dt of the whole motion: the sum over the segments."""
+        return float(sum(s.J for s in self.segments))
+
+    @property
+    def duration(self) -> float:
+        """t_e of the whole motion [s]."""
+        return self.trajectory.duration
+
+    @property
+    def cost(self) -> Cost:
+        """The running cost f0 that was minimised."""
+        return self.segments[0].cost
+
+    @property
+    def collisions(self) -> CollisionModel | None:
+        """The bodies kept apart and the margin, when collisions were checked."""
+        return self.segments[0].collisions
+
+    @property
+    def clearance(self) -> Clearance | None:
+        """The closest certified clearance over the segments, when checked."""
+        found = [s.clearance for s in self.segments if s.clearance is not None]
+        return min(found, key=lambda c: c.closest.distance) if found else None
+
+    @property
+    def initial_trajectory(self) -> ChainedTrajectory:
+        """The segments' first paths (straight lines, or OMPL's), timed by stage 1, one after
+        another (each from where the previous segment's plan ended: where a goal moved along its
+        pose, they do not join)."""
+        return ChainedTrajectory([s.initial.trajectory for s in self.segments], joined=False)
+
+    @property
+    def initial_J(self) -> float:  # noqa: N802 - the paper's name
+        """J of :attr:`initial_trajectory`."""
+        return float(sum(s.initial.J for s in self.segments))
+
+    @property
+    def target_configurations(self) -> tuple[NDArray[np.float64], ...]:
+        """Where the arm is at each target [rad or m] (a tool pose: the configuration the plan
+        reached it with), each (n,)."""
+        out: list[NDArray[np.float64]] = []
+        for segment in self.segments:
+            out.extend(segment.via)
+            out.append(segment.trajectory(segment.duration, 0)[0])
+        return tuple(out)
+
+    @property
+    def target_times(self) -> NDArray[np.float64]:
+        """When the motion reaches each target [s], shape (len(targets),)."""
+        times: list[float] = []
+        for start, segment in zip(self.trajectory.starts, self.segments, strict=True):
+            times.extend(start + segment.via_times)
+            times.append(start + segment.duration)
+        return np.array(times)
+
+    @property
+    def waypoints(self) -> tuple[Waypoint, ...]:
+        """Every target but the last as :func:`~nearopt.verify` checks it: the configuration
+        reached, the pose if it is one, at rest where it is a stop."""
+        return tuple(
+            Waypoint(float(t), q, target.goal if isinstance(target.goal, ToolPose) else None,
+                     target.stop)
+            for t, q, target in zip(self.target_times[:-1], self.target_configurations[:-1],
+                                    self.targets[:-1], strict=True)
+        )
+
+    @property
+    def goal(self) -> ToolPose | None:
+        """The last target, when it is a tool pose."""
+        last = self.targets[-1].goal
+        return last if isinstance(last, ToolPose) else None
+
+    @property
+    def poses(self) -> tuple[ToolPose, ...]:
+        """The tool-pose targets, in order."""
+        return tuple(t.goal for t in self.targets if isinstance(t.goal, ToolPose))
+
+
+def plan_task(
+    robot: Robot,
+    q0: ArrayLike,
+    targets: Task | Sequence[Target | ArrayLike | ToolPose],
+    cost: Cost | None = None,
+    *,
+    method: Method | str | None = None,
+    options: SCPOptions | PaperOptions | None = None,
+    grid: int = 200,
+    max_iterations: int = 200,
+    time_limit: float = 300.0,
+    velocity_limits: bool = True,
+    position_limits: bool = True,
+    callback: Callable[[int, Iteration], None] | None = None,
+    scene: Scene | CollisionModel | None = None,
+    margin: float | None = None,
+    self_collision: bool | None = None,
+    optimise_goal: bool = True,
+) -> TaskResult:
+    """Plan a task: from rest at θ0 through its targets in order, stopping where they say.
+
+    Parameters
+    ----------
+    robot, q0, cost, method, options, grid, velocity_limits, position_limits, scene, margin, \
+self_collision, optimise_goal
+        As :func:`~nearopt.plan`, for every segment (one collision model for all).
+    targets
+        A :class:`Task`, or :class:`Target` records; a bare joint vector or
+        :class:`~nearopt.ToolPose` is a target the arm stops at. The last target is always a stop.
+    max_iterations
+        The iteration budget of each segment.
+    time_limit
+        Wall-time budget of the whole task [s], shared by the segments still to plan (time a
+        segment leaves is passed on).
+    callback
+        Called with (segment index, :class:`Iteration`) for every accepted iterate.
+
+    Returns
+    -------
+    TaskResult
+        The segments and the whole motion. A Ctrl-C (KeyboardInterrupt) ends the segment being
+        planned with its best plan so far; the rest are then timed on their first paths
+        (``max_iterations`` 0), status :attr:`StopReason.INTERRUPTED`.
+
+    Raises
+    ------
+    ConfigurationError
+        No targets, a bad target (naming it), or a bad argument as :func:`~nearopt.plan`.
+    InfeasiblePathError, UnreachablePoseError, CollisionError, SolverError
+        As :func:`~nearopt.plan`, for a segment (the message names it and its targets).
+    """
+    t_start = time.perf_counter()
+    if not isinstance(robot, Robot):
+        raise ConfigurationError(
+            f"robot must be a nearopt.Robot, got {type(robot).__name__} {robot!r:.60}"
+        )
+    records = _targets(targets.targets if isinstance(targets, Task) else targets)
+    cost = TimeCost() if cost is None else cost
+    if not (time_limit > 0):
+        raise ConfigurationError(
+            f"time_limit must be a positive number of seconds, got {time_limit}"
+        )
+    collisions = _collision_model(robot, scene, margin, self_collision)
+    groups: list[list[Target]] = [[]]
+    for target in records:
+        groups[-1].append(target)
+        if target.stop:
+            groups.append([])
+    groups = [g for g in groups if g]
+    segments: list[PlanResult] = []
+    start = robot.check_configuration(q0, "q0")
+    interrupted = False
+    for k, group in enumerate(groups):
+        left = time_limit - (time.perf_counter() - t_start)
+        budget = max(left / (len(groups) - k), 1e-3)
+        names = ", ".join(repr(t.name) for t in group)
+
+        def forward(entry: Iteration, k: int = k) -> None:
+            if callback is not None:
+                callback(k, entry)
+
+        try:
+            segment = plan(
+                robot, start, group[-1].goal, cost, method=method, options=options, grid=grid,
+                max_iterations=0 if interrupted else max_iterations, time_limit=budget,
+                velocity_limits=velocity_limits, position_limits=position_limits,
+                callback=forward, scene=collisions, optimise_goal=optimise_goal,
+                via=[t.goal for t in group[:-1]],
+            )
+        except KeyboardInterrupt:  # before the segment had a plan: time its first path only
+            interrupted = True
+            segment = plan(
+                robot, start, group[-1].goal, cost, method=method, options=options, grid=grid,
+                max_iterations=0, time_limit=budget, velocity_limits=velocity_limits,
+                position_limits=position_limits, scene=collisions,
+                optimise_goal=optimise_goal, via=[t.goal for t in group[:-1]],
+            )
+        except NearoptError as exc:  # the same error, saying which segment
+            exc.args = (f"segment {k + 1} (to {names}): {exc}", *exc.args[1:])
+            raise
+        interrupted = interrupted or segment.status == StopReason.INTERRUPTED
+        segments.append(segment)
+        start = segment.trajectory(segment.duration, 0)[0]
+    trajectory = ChainedTrajectory([s.trajectory for s in segments])
+    message = "; ".join(f"segment {k + 1}: {s.status}, {s.message}"
+                        for k, s in enumerate(segments))
+    return TaskResult(
+        robot=robot,
+        targets=records,
+        segments=tuple(segments),
+        trajectory=trajectory,
+        status=StopReason.INTERRUPTED if interrupted else _least_settled(segments),
+        message=message,
+        wall_time=time.perf_counter() - t_start,
+    )
+
+
+_ORDER = (StopReason.INTERRUPTED, StopReason.SOLVER, StopReason.TIME_LIMIT,
+          StopReason.ITERATION_LIMIT, StopReason.NO_PROGRESS, StopReason.CONVERGED)
+
+
+def _least_settled(segments: list[PlanResult]) -> StopReason:
+    return min((s.status for s in segments), key=_ORDER.index)
+
+
+def _targets(targets: Sequence[Target | ArrayLike | ToolPose]) -> tuple[Target, ...]:
+    """The targets as records with names; the last one a stop."""
+    if isinstance(targets, str | bytes | ToolPose | Target) or not isinstance(
+        targets, Sequence | np.ndarray
+    ):
+        raise ConfigurationError(
+            f"targets is a list of targets (Target, joint vectors or ToolPose), got "
+            f"{targets!r:.80}"
+        )
+    if isinstance(targets, np.ndarray) and targets.ndim != 2:
+        raise ConfigurationError(
+            f"targets as an array has one row per target, got shape {targets.shape}"
+        )
+    if len(targets) == 0:
+        raise ConfigurationError("a task needs at least one target")
+    out = []
+    for k, target in enumerate(targets, start=1):
+        if not isinstance(target, Target):
+            if isinstance(target, int | float | np.number):
+                raise ConfigurationError(
+                    f"target {k} is the number {target!r}: a target is a joint vector, a "
+                    "ToolPose or a Target (a flat list of numbers is one configuration, not a "
+                    "task)"
+                )
+            target = Target(target)
+        if not isinstance(target.stop, bool | np.bool_):
+            raise ConfigurationError(
+                f"target {k}: stop must be true or false, got {target.stop!r}"
+            )
+        if target.name is not None and not (isinstance(target.name, str) and target.name):
+            raise ConfigurationError(
+                f"target {k}: name must be a non-empty string, got {target.name!r}"
+            )
+        name = target.name or f"target {k}"
+        last = k == len(targets)
+        out.append(Target(target.goal, bool(target.stop) or last, name))
+    return tuple(out)

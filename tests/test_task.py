@@ -1,0 +1,218 @@
+"""Tasks (#12): targets stopped at or passed through, planned as rest-to-rest segments and written
+out as one motion; the task file; the pick-and-place example."""
+
+from __future__ import annotations
+
+import csv
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pinocchio as pin
+import pytest
+from checks import assert_independent_checks
+from conftest import load
+
+import nearopt
+from nearopt import ChainedTrajectory, Target, Task, TaskError, ToolPose, Waypoint
+from nearopt.kinematics import pose_error
+
+ROOT = Path(__file__).resolve().parents[1]
+UR5_START = np.array([-0.8, -1.2, 1.2, -1.5, -1.57, 0.0])
+UR5_PASS = np.array([-0.3, -1.6, 0.8, -1.0, -1.57, 0.5])
+UR5_STOP = np.array([0.2, -1.3, 1.0, -1.4, -1.2, 0.3])
+UR5_GOAL = np.array([0.8, -1.2, 1.2, -1.5, -1.57, 0.0])
+
+
+def test_a_chained_trajectory_is_its_parts_one_after_another() -> None:
+    robot = load("two_link")
+    a = nearopt.plan(robot, [0.7, -1.5], [-1.5, 0.0], max_iterations=0)
+    b = nearopt.plan(robot, [-1.5, 0.0], [0.3, 0.2], max_iterations=0)
+    chain = ChainedTrajectory([a.trajectory, b.trajectory])
+    assert chain.duration == pytest.approx(a.duration + b.duration, rel=1e-14)
+    t = np.linspace(0.0, b.duration, 7)
+    for order in (0, 1, 2):
+        np.testing.assert_allclose(chain(a.duration + t[1:], order), b.trajectory(t[1:], order),
+                                   rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(chain(t[:-1] * a.duration / b.duration, order),
+                                   a.trajectory(t[:-1] * a.duration / b.duration, order),
+                                   rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(chain.part_at([0.0, a.duration, chain.duration]), [0, 1, 1])
+    assert chain.integrate(lambda q, qd, u: np.ones(len(q))) == pytest.approx(chain.duration)
+    report = nearopt.verify(chain, robot, q0=[0.7, -1.5], qe=[0.3, 0.2],
+                            waypoints=[Waypoint(a.duration, [-1.5, 0.0], stop=True)])
+    assert report.passed, str(report)
+    with pytest.raises(nearopt.ConfigurationError, match="starts where the previous one ends"):
+        ChainedTrajectory([b.trajectory, a.trajectory])
+
+
+def test_a_task_stops_where_it_says_and_passes_where_it_says() -> None:
+    """ur5: pass, stop, goal. The stop is at rest from both sides, the pass-through is exact and
+    moving, J is the segments' sum, and the whole motion passes the independent checks."""
+    robot = load("ur5")
+    cost = nearopt.TorqueCost(0.001)
+    result = nearopt.plan_task(
+        robot, UR5_START,
+        [Target(UR5_PASS, stop=False, name="pass"), Target(UR5_STOP, name="stop"), UR5_GOAL],
+        cost, grid=100, max_iterations=8,
+    )
+    assert [t.name for t in result.targets] == ["pass", "stop", "target 3"]
+    assert len(result.segments) == 2 and len(result.segments[0].via) == 1
+    t_pass, t_stop, t_end = result.target_times
+    assert 0 < t_pass < t_stop < t_end == pytest.approx(result.duration)
+    q, qd, _ = result.trajectory.states(np.array([t_pass, t_stop]))
+    np.testing.assert_allclose(q, [UR5_PASS, UR5_STOP], atol=1e-10)
+    assert np.abs(qd[0]).max() > 0.3  # passes
+    before = result.trajectory(np.array([t_stop - 1e-9]), 1)[0]
+    assert np.abs(qd[1]).max() < 1e-12 and np.abs(before).max() < 1e-3  # stops
+    assert result.J == pytest.approx(sum(s.J for s in result.segments), rel=1e-14)
+    assert result.J == pytest.approx(result.trajectory.integrate(cost), rel=1e-6)
+    assert_independent_checks(robot, result.trajectory, cost, result.J, UR5_START, UR5_GOAL)
+    report = nearopt.verify(result.trajectory, robot, waypoints=result.waypoints,
+                            simulate=False)
+    assert {"via-point positions", "rest at stops"} <= {c.name for c in report.checks}
+    assert report.passed, str(report)
+    # a stop is planned like a goal: the second segment alone costs what the task's does
+    alone = nearopt.plan(robot, UR5_STOP, UR5_GOAL, cost, grid=100, max_iterations=8)
+    assert result.segments[1].J == pytest.approx(alone.J, rel=1e-9)
+
+
+def test_the_verifier_sees_a_missed_target_and_a_moving_stop() -> None:
+    robot = load("two_link")
+    a = nearopt.plan(robot, [0.7, -1.5], [-1.5, 0.0], max_iterations=0)
+    late = nearopt.verify(a.trajectory, robot, simulate=False,
+                          waypoints=[Waypoint(0.5 * a.duration, [-1.5, 0.0], stop=True)])
+    assert {c.name for c in late.failures()} == {"via-point positions", "rest at stops"}
+
+
+def test_a_task_file_is_read_and_bad_ones_name_the_target_and_field(tmp_path: Path) -> None:
+    good = tmp_path / "task.toml"
+    good.write_text(
+        'start = [0, -45, 0, -135, 0, 90, 45]\nunits = "deg"\nframe = "panda_hand"\n'
+        '[[target]]\nname = "above"\npose = [0.5, 0.1, 0.4]\nstop = false\n'
+        '[[target]]\nq = [10, -30, 0, -120, 0, 90, 45]\n'
+    )
+    task = Task.from_file(good)
+    np.testing.assert_allclose(task.start, np.deg2rad([0, -45, 0, -135, 0, 90, 45]))
+    above, second = task.targets
+    assert above == Target(ToolPose((0.5, 0.1, 0.4), None, "panda_hand"), False, "above")
+    np.testing.assert_allclose(second.goal, np.deg2rad([10, -30, 0, -120, 0, 90, 45]))
+    assert second.stop and second.name == "target 2"
+    cases = {
+        'speed = 1\n[[target]]\nq = [0]\n': ("speed", None),
+        '[[target]]\nname = "a"\nq = [0]\npose = [1, 2, 3]\n': ("q", "a"),
+        '[[target]]\nname = "a"\n': ("q", "a"),
+        '[[target]]\nname = "b"\nq = [0]\nstop = "no"\n': ("stop", "b"),
+        '[[target]]\nname = "c"\npose = [1, 2, 3, 4]\n': ("pose", "c"),
+        '[[target]]\nname = "d"\nq = [0, nan]\n': ("q", "d"),
+        '[[target]]\nname = "e"\nq = [0]\nframe = "tool"\n': ("frame", "e"),
+        '[[target]]\nname = "f"\nq = [0]\ncolour = 1\n': ("colour", "f"),
+        'units = "grad"\n[[target]]\nq = [0]\n': ("units", None),
+        'start = 3\n[[target]]\nq = [0]\n': ("start", None),
+        'frame = "x"\n': ("target", None),
+    }
+    for text, (field, target) in cases.items():
+        bad = tmp_path / "bad.toml"
+        bad.write_text(text)
+        with pytest.raises(TaskError) as caught:
+            Task.from_file(bad)
+        assert (caught.value.field, caught.value.target) == (field, target), text
+        assert str(bad) in str(caught.value)
+    for text in ("[[target]\n", "\xff\xfe"):
+        (tmp_path / "broken.toml").write_bytes(text.encode("latin-1"))
+        with pytest.raises(TaskError, match="not valid TOML"):
+            Task.from_file(tmp_path / "broken.toml")
+    with pytest.raises(TaskError, match="cannot read"):
+        Task.from_file(tmp_path / "missing.toml")
+
+
+def test_bad_targets_are_configuration_errors() -> None:
+    robot = load("ur5")
+    for targets in ([], UR5_GOAL.tolist(), "goal", [Target(UR5_GOAL, stop="yes")],
+                    [Target(UR5_GOAL, name="")]):
+        with pytest.raises(nearopt.ConfigurationError):
+            nearopt.plan_task(robot, UR5_START, targets)
+    with pytest.raises(nearopt.ConfigurationError, match=r"segment 2 \(to 'target 2'\)"):
+        nearopt.plan_task(robot, UR5_START, [UR5_GOAL, np.zeros(5)], max_iterations=0)
+
+
+def test_the_cli_plans_a_task_file_and_marks_the_segments(tmp_path: Path) -> None:
+    task = tmp_path / "task.toml"
+    rows = "\n".join(
+        f'[[target]]\nname = "{name}"\nq = {q.tolist()}\nstop = {str(stop).lower()}\n'
+        for name, q, stop in (("pass", UR5_PASS, False), ("stop", UR5_STOP, True),
+                              ("end", UR5_GOAL, True))
+    )
+    task.write_text(f"start = {UR5_START.tolist()}\n{rows}")
+    out, table = tmp_path / "task.json", tmp_path / "task.csv"
+    run = subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--task", str(task),
+         "--beta", "0.001", "--max-iterations", "3", "--grid", "100", "--quiet",
+         "--json", str(out), "--csv", str(table)],
+        capture_output=True, text=True, timeout=300,
+    )
+    assert run.returncode == 0, run.stderr
+    assert "2 segments" in run.stdout and "segment 2 (to end)" in run.stdout
+    doc = json.loads(out.read_text())
+    assert [t["name"] for t in doc["targets"]] == ["pass", "stop", "end"]
+    assert [t["stop"] for t in doc["targets"]] == [False, True, True]
+    first, second = doc["segments"]
+    assert first["targets"] == ["pass", "stop"] and second["targets"] == ["end"]
+    assert first["t_end"] == second["t_start"] == doc["targets"][1]["t"]
+    assert doc["J"] == pytest.approx(first["J"] + second["J"], rel=1e-12)
+    with table.open() as stream:
+        samples = list(csv.DictReader(stream))
+    t = np.array([float(r["t"]) for r in samples])
+    segment = np.array([int(r["segment"]) for r in samples])
+    np.testing.assert_array_equal(segment, np.where(t < first["t_end"], 1, 2))
+    k = int(np.argmin(np.abs(t - first["t_end"])))  # the sample nearest the stop: nearly still
+    qd = np.array([[float(samples[k][f"qd_{j}"]) for j in load("ur5").joint_names]])
+    assert np.abs(qd).max() < 0.05
+    for args, message in ((["--qe", *map(str, UR5_GOAL)], "once"),
+                          (["--via", *map(str, UR5_PASS)], "--via applies")):
+        run = subprocess.run(
+            [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--task", str(task),
+             *args], capture_output=True, text=True, timeout=120)
+        assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
+    task.write_text(rows)  # no start in the file, none on the command line
+    run = subprocess.run([sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5",
+                          "--task", str(task)], capture_output=True, text=True, timeout=120)
+    assert run.returncode == 2 and "start configuration" in run.stderr
+
+
+def test_the_pick_and_place_example_runs_and_its_files_hold_the_task(tmp_path: Path) -> None:
+    """scripts/02_pick_and_place.py (as CI runs it): the JSON's samples reach every pose
+    (independent forward kinematics), at rest where the task stops, moving where it passes."""
+    run = subprocess.run(
+        [sys.executable, str(ROOT / "scripts" / "02_pick_and_place.py"), "--out",
+         str(tmp_path)], capture_output=True, text=True, timeout=600,
+    )
+    assert run.returncode == 0, run.stderr + run.stdout
+    assert "verification" in run.stdout and "FAIL" not in run.stdout
+    names = {p.name for p in tmp_path.iterdir()}
+    assert {"pick_and_place.html", "pick_and_place.json", "pick_and_place.csv",
+            "workspace.png", "torques.png", "speeds.png", "history.png"} <= names
+    doc = json.loads((tmp_path / "pick_and_place.json").read_text())
+    robot = load("panda")
+    data = robot.model.createData()
+    frame = robot.model.getFrameId("panda_hand_tcp")
+    for target in doc["targets"]:
+        pin.framesForwardKinematics(robot.model, data, np.array(target["q"]))
+        x, y, z, qx, qy, qz, qw = target["pose"]
+        np.testing.assert_allclose(data.oMf[frame].translation, [x, y, z], atol=1e-6)
+        wanted = pin.Quaternion(qw, qx, qy, qz).toRotationMatrix()
+        np.testing.assert_allclose(data.oMf[frame].rotation, wanted, atol=1e-6)
+        assert max(pose_error(robot, np.array(target["q"]),
+                              ToolPose((x, y, z), (qx, qy, qz, qw), "panda_hand_tcp"))) < 1e-6
+    t, q = np.array(doc["t"]), np.array(doc["q"])
+    pin.framesForwardKinematics(robot.model, data, q[-1])
+    np.testing.assert_allclose(data.oMf[frame].translation, doc["targets"][-1]["pose"][:3],
+                               atol=1e-6)
+    assert [x["stop"] for x in doc["targets"]] == [False, True, False, True]
+    assert len(doc["segments"]) == 2
+    speed = np.abs(np.array(doc["qd"])).max(axis=1)
+    for target in doc["targets"][:3]:  # the samples beside each target: moving unless it stops
+        k = int(np.argmin(np.abs(t - target["t"])))
+        assert (speed[k] < 0.1) if target["stop"] else (speed[k] > 0.5), target["name"]
