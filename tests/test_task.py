@@ -216,3 +216,23 @@ def test_the_pick_and_place_example_runs_and_its_files_hold_the_task(tmp_path: P
     for target in doc["targets"][:3]:  # the samples beside each target: moving unless it stops
         k = int(np.argmin(np.abs(t - target["t"])))
         assert (speed[k] < 0.1) if target["stop"] else (speed[k] > 0.5), target["name"]
+
+
+def test_a_first_path_through_a_via_point_at_a_limit_stays_within_the_limits() -> None:
+    """panda's joint 4 turns back at a via-point 1 mrad inside its upper limit: the B-spline
+    corrected to pass it exactly keeps every control point (so the whole path) within the
+    limits, and the plan verifies."""
+    robot = load("panda")
+    upper = robot.limits.position_upper
+    q0 = np.array([0.0, -0.5, 0.0, -1.2, 0.0, 1.5, 0.8])
+    via = np.array([0.4, -0.3, 0.2, upper[3] - 1e-3, 0.1, 1.6, 0.6])
+    qe = np.array([0.9, -0.4, 0.3, -1.3, 0.2, 1.8, 0.4])
+    for iterations in (0, 5):
+        result = nearopt.plan(robot, q0, qe, via=[via], grid=100, max_iterations=iterations)
+        s = np.linspace(0.0, 1.0, 4001)
+        q = result.path(s * result.path.s_end, 0)
+        assert np.all(q <= upper + 1e-9) and np.all(q >= robot.limits.position_lower - 1e-9)
+        np.testing.assert_allclose(result.trajectory(result.via_times, 0)[0], via, atol=1e-10)
+        report = nearopt.verify(result.trajectory, robot, q0=q0, qe=qe,
+                                waypoints=result.waypoints, simulate=False)
+        assert report.passed, str(report)

@@ -209,12 +209,14 @@ def plan(
         if np.any(np.all(np.diff(points, axis=0) == 0.0, axis=1)):
             raise ConfigurationError("two consecutive points (start, via-points, goal) are equal")
         k = max(options.control_points, 4 * (len(vias) + 1))
-        start, sigma = path_through(points, k, knot_breaks(options, k))
+        bounds = _bounds(robot, position_limits)
+        start, sigma = path_through(points, k, knot_breaks(options, k), None, *bounds)
+        _check_inside(robot, start, bounds)
         line, via_s = start, tuple(float(x) for x in sigma)
     if collisions is not None:
         if vias and not collisions.path_clearance(line).certified:
             start, sigma = _around_obstacles(
-                collisions, points, options,
+                collisions, points, options, bounds,
                 min(max(0.25 * (t_start + time_limit - time.perf_counter()), 1e-3), 5.0))
             line, via_s = start, tuple(float(x) for x in sigma)
         if not vias and not collisions.path_clearance(line).certified:
@@ -316,7 +318,7 @@ def plan(
 
 def _around_obstacles(
     collisions: CollisionModel, points: NDArray[np.float64], options: SCPOptions,
-    time_limit: float,
+    bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None], time_limit: float,
 ) -> tuple[BSplinePath, NDArray[np.float64]]:
     """A first path through via-points whose straight legs collide: each colliding leg is an
     OMPL path (RRT-Connect, certified, fitted), the legs joined into one polyline and the
@@ -341,13 +343,40 @@ def _around_obstacles(
         if k > MAX_CONTROL_POINTS:
             break
         path, sigma = path_through(dense, k, knot_breaks(options, k) if k == k0 else None,
-                                   exact=exact[:-1])
+                                   exact[:-1], *bounds)
         if collisions.path_clearance(path).certified:
+            _check_inside(collisions.robot, path, bounds)
             return path, sigma
     raise CollisionError(
         "no B-spline through the via-points keeps the margin along the collision-free legs "
         f"OMPL found (tried up to {min(8 * k0, MAX_CONTROL_POINTS)} control points)"
     )
+
+
+def _bounds(robot: Robot, position_limits: bool
+            ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """The position limits a first path through via-points keeps, when they are enforced."""
+    if not position_limits:
+        return None, None
+    return robot.limits.position_lower, robot.limits.position_upper
+
+
+def _check_inside(robot: Robot, path: BSplinePath,
+                  bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]) -> None:
+    """A first path whose control points leave the position limits is refused, naming the
+    joint (its curve could leave them; stage 2 starts from feasible paths only)."""
+    lower, upper = bounds
+    if lower is None or upper is None:
+        return
+    c = path.control_points
+    excess = np.maximum(lower - c, c - upper)
+    k, j = np.unravel_index(np.argmax(excess), excess.shape)
+    if excess[k, j] > 1e-9:
+        raise InfeasiblePathError(
+            f"no first path through the via-points keeps joint {robot.joint_names[j]!r} within "
+            f"its position limits [{lower[j]:.6g}, {upper[j]:.6g}] (a control point at "
+            f"{c[k, j]:.6g}): move the via-points away from the limit"
+        )
 
 
 def _via_points(

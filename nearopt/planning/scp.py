@@ -334,14 +334,17 @@ def _onto(robot: Robot, goal: ToolPose, q: NDArray[np.float64]) -> NDArray[np.fl
 
 def path_through(
     points: NDArray[np.float64], interior: int, breaks: NDArray[np.float64] | None = None,
-    exact: Sequence[int] | None = None,
+    exact: Sequence[int] | None = None, lower: NDArray[np.float64] | None = None,
+    upper: NDArray[np.float64] | None = None,
 ) -> tuple[BSplinePath, NDArray[np.float64]]:
     """A B-spline from ``points[0]`` to ``points[-1]`` along the polyline through ``points``,
     through the points ``exact`` exactly, and the σ where it passes them (by joint-space arc
     length along the polyline).
 
     The control points lie on the polyline at their Greville abscissae, then move by the least
-    change that puts θ(σ_v) on each exact point.
+    change that puts θ(σ_v) on each exact point; with position limits, the least change that also
+    keeps every control point within them (a small QP per joint, Clarabel), so the whole curve
+    stays within them (a B-spline lies in the convex hull of its control points).
 
     Parameters
     ----------
@@ -353,6 +356,8 @@ def path_through(
         Interior knots (default uniform).
     exact
         Indices of the points the path passes exactly (default: every point between the ends).
+    lower, upper
+        Position limits [rad or m], shape (n,), that every point lies within (default: none).
     """
     from ..collision.sampling import fit_polyline
 
@@ -365,8 +370,52 @@ def path_through(
         basis = spline.basis(sigma)
         inner = basis[:, 1:-1]
         miss = points[index] - basis @ control  # (m, n)
-        control[1:-1] += inner.T @ np.linalg.solve(inner @ inner.T, miss)
+        step = inner.T @ np.linalg.solve(inner @ inner.T, miss)
+        if lower is not None and upper is not None:
+            inside = control[1:-1] + step
+            for j in np.flatnonzero(np.any(inside < lower - 1e-12, axis=0)
+                                    | np.any(inside > upper + 1e-12, axis=0)):
+                step[:, j] = _bounded_step(inner, miss[:, j], control[1:-1, j], lower[j],
+                                           upper[j], step[:, j])
+        control[1:-1] += step
     return BSplinePath(control, breaks), sigma
+
+
+def _bounded_step(
+    inner: NDArray[np.float64], miss: NDArray[np.float64], control: NDArray[np.float64],
+    lower: float, upper: float, fallback: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """min ½|x|² s.t. inner x = miss, lower ≤ control + x ≤ upper (one joint), by Clarabel;
+    ``fallback`` if it has no solution."""
+    import clarabel
+
+    k = control.size
+    rows = [sp.csr_matrix(inner)]
+    rhs = [miss]
+    cones: list[object] = [clarabel.ZeroConeT(miss.size)]
+    bounds = []
+    if np.isfinite(upper):
+        rows.append(sp.identity(k, format="csr"))
+        rhs.append(upper - control)
+        bounds.append(k)
+    if np.isfinite(lower):
+        rows.append(-sp.identity(k, format="csr"))
+        rhs.append(control - lower)
+        bounds.append(k)
+    if bounds:
+        cones.append(clarabel.NonnegativeConeT(sum(bounds)))
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    solver = clarabel.DefaultSolver(sp.identity(k, format="csc"), np.zeros(k),
+                                    sp.vstack(rows, format="csc"), np.concatenate(rhs), cones,
+                                    settings)
+    solution = solver.solve()
+    if solution.status != clarabel.SolverStatus.Solved:
+        return fallback
+    x = np.asarray(solution.x)
+    # the bounds to rounding, then the exact points again (the residual is rounding only)
+    x = np.clip(control + x, lower, upper) - control
+    return x + np.linalg.lstsq(inner, miss - inner @ x, rcond=None)[0]
 
 
 def _range(lim: object) -> NDArray[np.float64]:

@@ -4,8 +4,8 @@ A task is planned as rest-to-rest segments: a segment ends at every target the a
 the targets it passes through on the way are the segment's via-points (:func:`~nearopt.plan`'s
 ``via``, exact at every iterate). Segments between stops are independent given the stop
 configurations (the arm is at rest there), so the task's J is the sum of the segments' and each
-segment is planned (and its tool-pose goal optimised along the pose) in turn, from where the
-previous one ended.
+segment is planned in turn from where the previous one ended (the last target, if a tool pose,
+optimised along its pose; the stops before it at inverse kinematics' configurations).
 
 A task file (TOML; joint values in ``units``, poses in metres and a quaternion (x, y, z, w) in
 the base frame)::
@@ -322,8 +322,14 @@ def plan_task(
     Parameters
     ----------
     robot, q0, cost, method, options, grid, velocity_limits, position_limits, scene, margin, \
-self_collision, optimise_goal
+self_collision
         As :func:`~nearopt.plan`, for every segment (one collision model for all).
+    optimise_goal
+        The last target, when it is a tool pose, moves along its pose with the last segment's
+        path to lower J (:func:`~nearopt.plan`). The targets stopped at before it keep inverse
+        kinematics' configurations: moving one changes the segment after it too, and moving
+        each for its own segment alone was measured to raise the task's J (up to +41 % on a
+        seeded panda task).
     targets
         A :class:`Task`, or :class:`Target` records; a bare joint vector or
         :class:`~nearopt.ToolPose` is a target the arm stops at. The last target is always a stop.
@@ -384,7 +390,8 @@ self_collision, optimise_goal
                 robot, start, group[-1].goal, cost, method=method, options=options, grid=grid,
                 max_iterations=0 if interrupted else max_iterations, time_limit=budget,
                 velocity_limits=velocity_limits, position_limits=position_limits,
-                callback=forward, scene=collisions, optimise_goal=optimise_goal,
+                callback=forward, scene=collisions,
+                optimise_goal=optimise_goal and k == len(groups) - 1,
                 via=[t.goal for t in group[:-1]],
             )
         except KeyboardInterrupt:  # before the segment had a plan: time its first path only
@@ -393,7 +400,8 @@ self_collision, optimise_goal
                 robot, start, group[-1].goal, cost, method=method, options=options, grid=grid,
                 max_iterations=0, time_limit=budget, velocity_limits=velocity_limits,
                 position_limits=position_limits, scene=collisions,
-                optimise_goal=optimise_goal, via=[t.goal for t in group[:-1]],
+                optimise_goal=optimise_goal and k == len(groups) - 1,
+                via=[t.goal for t in group[:-1]],
             )
         except NearoptError as exc:  # the same error, saying which segment
             exc.args = (f"segment {k + 1} (to {names}): {exc}", *exc.args[1:])
