@@ -23,7 +23,7 @@ $(BIN)/python:
 	$(BIN)/python -m pip install -q --upgrade pip
 
 $(STAMP): pyproject.toml | $(BIN)/python
-	$(BIN)/python -m pip install -q -e '.[test,bench,viz]'
+	$(BIN)/python -m pip install -q -e '.[test,bench,viz,batch]'
 	@touch $(STAMP)
 
 run: setup

@@ -6,6 +6,7 @@ The package follows the paper "Near-Optimum Trajectory Planning for Robot Manipu
 ``verify``; ``viewer`` and ``figures`` to look at it, ``export`` to write it.
 """
 
+from .batch import MotionOutcome, MotionRequest, plan_many
 from .catalog import available_robots
 from .collision import CollisionModel, Obstacle, Scene
 from .cost import CallableCost, Cost, TimeCost, TorqueCost
@@ -56,6 +57,9 @@ __all__ = [
     "plan",
     "PlanResult",
     "plan_task",
+    "plan_many",
+    "MotionRequest",
+    "MotionOutcome",
     "Target",
     "Task",
     "TaskResult",

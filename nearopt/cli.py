@@ -3,6 +3,7 @@
     nearopt plan --robot two_link --q0 45 -90 --qe -90 0 --deg --beta 0.03 --json plan.json \
         --csv plan.csv --plots figures/ --html plan.html [--show]
     nearopt plan --robot panda --task pick.toml --scene cell.toml --json task.json
+    nearopt batch motions.jsonl --out table/ [--workers N | --scheduler tcp://HOST:8786]
     nearopt robots
 
 Every failure the user can cause (a bad argument, a bad URDF, an infeasible request) ends with one
@@ -46,7 +47,7 @@ if TYPE_CHECKING:
 
     from numpy.typing import NDArray
 
-__all__ = ["main", "parse_plan", "prepare", "solve", "check", "Prepared"]
+__all__ = ["main", "plan_options", "parse_plan", "prepare", "solve", "check", "Prepared"]
 
 
 class _Parser(argparse.ArgumentParser):
@@ -148,6 +149,23 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--show", action="store_true",
                    help="play it in the browser (meshcat server on 127.0.0.1) until Ctrl+C")
     p.add_argument("--quiet", action="store_true", help="no per-iteration output")
+    b = sub.add_parser("batch", help="plan many motions (JSON Lines) on this machine's cores or "
+                                     "on a Dask cluster")
+    b.add_argument("tasks", metavar="TASKS",
+                   help="motions, one JSON object per line: id and the long options of "
+                        "`nearopt plan` without dashes ('-' as '_')")
+    b.add_argument("--out", required=True, metavar="DIR",
+                   help="write DIR/<id>.json per motion and DIR/summary.csv")
+    where = b.add_mutually_exclusive_group()
+    where.add_argument("--workers", type=int, metavar="N",
+                       help="worker processes on this machine (default: one per core)")
+    where.add_argument("--scheduler", metavar="ADDRESS",
+                       help="a dask.distributed scheduler, e.g. tcp://10.0.0.5:8786")
+    b.add_argument("--rate", type=float, default=1000.0,
+                   help="the JSON files' sampling rate [Hz] (1000)")
+    b.add_argument("--retry-failed", action="store_true",
+                   help="plan again the motions an earlier run recorded as failed")
+    b.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 
 
@@ -280,6 +298,14 @@ def _robot(args: argparse.Namespace, loader: RobotLoader | None = None) -> Robot
         base = np.asarray(overrides.get("velocity", robot.limits.velocity), dtype=float)
         overrides["velocity"] = base * args.velocity_scale
     return robot.with_limits(**overrides) if overrides else robot
+
+
+def plan_options() -> tuple[str, ...]:
+    """The long options of ``nearopt plan`` without dashes, ``-`` as ``_`` (a batch's keys)."""
+    parser = _parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
+    names = (o for a in sub.choices["plan"]._actions for o in a.option_strings)  # noqa: SLF001
+    return tuple(sorted({o[2:].replace("-", "_") for o in names if o.startswith("--")} - {"help"}))
 
 
 def parse_plan(argv: Sequence[str]) -> argparse.Namespace:
@@ -480,6 +506,35 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     return 130 if result.status == StopReason.INTERRUPTED else 0
 
 
+def _batch_command(args: argparse.Namespace) -> int:
+    """``nearopt batch``: exit code 0 if every motion was planned, 1 if some failed, 130 on
+    Ctrl-C (what was written stays: run it again to go on)."""
+    from .batch import progress_line, read_requests, run_batch
+
+    if not (np.isfinite(args.rate) and 0 < args.rate <= MAX_RATE):
+        raise ConfigurationError(
+            f"--rate must be a number of Hz in (0, {MAX_RATE:.0e}], got {args.rate}"
+        )
+    if args.workers is not None and args.workers < 1:
+        raise ConfigurationError(f"--workers must be ≥ 1, got {args.workers}")
+    requests = read_requests(args.tasks)
+    t0 = time.perf_counter()
+    summary = run_batch(
+        requests, args.out, args.scheduler, workers=args.workers, rate=args.rate,
+        retry_failed=args.retry_failed, progress=None if args.quiet else progress_line(),
+    )
+    planned = len(summary.outcomes) - summary.failed
+    print(f"{len(requests)} motions: {planned} planned, {summary.failed} failed"
+          + (f" ({summary.skipped} done before, skipped)" if summary.skipped else "")
+          + f", {time.perf_counter() - t0:.1f} s; wrote {Path(args.out) / 'summary.csv'}")
+    for outcome in summary.outcomes:
+        if outcome.error:
+            print(f"  {outcome.id}: {outcome.error}", file=sys.stderr)
+        for message in outcome.warnings:
+            print(f"  {outcome.id}: warning: {message}", file=sys.stderr)
+    return 1 if summary.failed else 0
+
+
 FIGURE_NAMES = ("torques.png", "workspace.png", "history.png")
 
 
@@ -541,6 +596,8 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "robots":
             print("\n".join(available_robots()))
             return 0
+        if args.command == "batch":
+            return _batch_command(args)
         return _plan_command(args, interrupt)
     except VerificationError as exc:
         _fail(str(exc), code=1)
@@ -549,6 +606,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except OSError as exc:
         _fail(f"cannot write {exc.filename or 'an output file'}: {exc.strerror or exc}")
     except KeyboardInterrupt:
+        if args is not None and args.command == "batch":
+            _fail("interrupted: the motions written so far are kept (run it again to go on)",
+                  code=130)
         _fail("interrupted before a plan was found; nothing written", code=130)
     except _Abort:
         _fail("aborted by a second Ctrl-C; nothing written", code=130)

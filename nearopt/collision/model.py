@@ -151,6 +151,7 @@ class CollisionModel:
         margin: float | None = None,
         self_collision: bool = True,
     ) -> None:
+        self._arguments = (robot, scene, srdf, margin, self_collision)
         self.robot = robot
         self.scene = Scene() if scene is None else scene
         if not isinstance(self.scene, Scene):
@@ -352,6 +353,12 @@ class CollisionModel:
                          worst[1], checks)
 
     # ------------------------------------------------------------------ internals
+    def __reduce__(self) -> tuple[object, ...]:
+        """Pickled as its arguments (coal's shapes are not picklable): rebuilt where it is
+        unpickled, e.g. a plan sent back from a Dask worker."""
+        robot, scene, srdf, margin, self_collision = self._arguments
+        return (_rebuild, (robot, scene, srdf, margin, self_collision))
+
     def _configure(self) -> None:
         # GJK stops on an absolute duality gap: distances to ~1e-8 m on finely faceted hulls
         # (the default relative criterion leaves ~1e-6 m of noise on kinova's links)
@@ -503,3 +510,7 @@ def _srdf_disabled(path: Path) -> set[frozenset[str]]:
     return {frozenset((e.get("link1", ""), e.get("link2", "")))
             for e in root.iter("disable_collisions")}
 
+
+def _rebuild(robot: Robot, scene: Scene | None, srdf: str | Path | None, margin: float | None,
+             self_collision: bool) -> CollisionModel:
+    return CollisionModel(robot, scene, srdf=srdf, margin=margin, self_collision=self_collision)

@@ -1,0 +1,719 @@
+"""Many motions: plan a motion table on this machine's cores or on a Dask cluster.
+
+A request is one motion of ``nearopt plan``: an ``id`` and the long options of the command
+without their dashes, ``-`` written ``_`` (``{"id": "m1", "robot": "ur5", "q0": [...], "qe":
+[...], "beta": 0.001}``; ``"time_optimal": true``; ``"via": [[...], [...]]``; ``"scene":
+"cell.toml"``, ``"task": "pick.toml"``, ``"goal_pose": [x, y, z, qx, qy, qz, qw]``). Each is
+parsed by the same parser, planned and verified by the same code as ``nearopt plan``; the motion
+comes back as the JSON document ``nearopt plan --json`` writes (with the ``id``, the request and
+a ``"batch"`` record added).
+
+Where the motions run is a :class:`Pool`: :class:`LocalPool` (one process per core of this
+machine, :mod:`concurrent.futures`; a worker that dies is replaced and its motions re-run) or
+:class:`DaskPool` (the workers of a ``dask.distributed`` scheduler, which re-runs the tasks of a
+worker that dies). Each worker process loads a robot once and keeps it for the motions that
+follow.
+
+:func:`run_batch` (``nearopt batch TASKS --out DIR``) writes ``DIR/<id>.json`` per motion planned
+(``DIR/<id>.failed.json`` with the error per motion that failed) and ``DIR/summary.csv`` as the
+results arrive, every file atomically; run again, it skips the motions whose files hold the same
+request. :func:`plan_many` returns the plans themselves, in request order.
+"""
+
+from __future__ import annotations
+
+import concurrent.futures as cf
+import csv
+import io
+import json
+import multiprocessing
+import os
+import re
+import sys
+import threading
+import time
+import warnings
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
+from dataclasses import dataclass, field
+from enum import StrEnum
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+from .errors import ConfigurationError, NearoptError, SamplingWarning
+from .outputs import write_atomically
+
+if TYPE_CHECKING:
+    from .planning import PlanResult, TaskResult
+
+__all__ = [
+    "MotionRequest",
+    "MotionOutcome",
+    "OutcomeStatus",
+    "Pool",
+    "LocalPool",
+    "DaskPool",
+    "read_requests",
+    "plan_request",
+    "plan_many",
+    "run_batch",
+    "BatchSummary",
+    "SUMMARY_FIELDS",
+]
+
+PATH_OPTIONS = ("urdf", "srdf", "scene", "task")
+"""Options naming files: relative paths are read from the requests file's folder."""
+OUTPUT_OPTIONS = ("json", "csv", "html", "plots", "show")
+"""Options of ``nearopt plan`` a request cannot have: the batch writes the outputs."""
+SUMMARY_FIELDS = ("id", "status", "J", "te", "iterations", "wall_time", "error")
+"""The columns of ``summary.csv``."""
+_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
+MAX_ATTEMPTS = 3  # a motion whose worker died this many times is recorded as failed
+
+
+@dataclass(frozen=True)
+class MotionRequest:
+    """One motion of a batch.
+
+    Attributes
+    ----------
+    id
+        Its name: letters, digits, ``.``, ``_``, ``-`` (the output is ``<id>.json``).
+    options
+        The long options of ``nearopt plan`` without dashes, ``-`` as ``_``, with JSON values
+        (a flag: ``true``; several values: a list; a repeated option such as ``via``: a list of
+        lists). File paths absolute (:func:`read_requests` resolves them).
+    """
+
+    id: str
+    options: Mapping[str, Any]
+
+    @classmethod
+    def from_dict(cls, data: Mapping[str, Any], default_id: str,
+                  folder: Path | None = None) -> MotionRequest:
+        """A request from a JSON object (``id`` and options); relative file paths are taken
+        from ``folder`` (default: the working folder).
+
+        Raises
+        ------
+        ConfigurationError
+            If it is not an object, or its id is not a usable file name.
+        """
+        if not isinstance(data, Mapping):
+            raise ConfigurationError(f"a motion is a JSON object, got {data!r:.80}")
+        motion_id = data.get("id", default_id)
+        if not isinstance(motion_id, str) or not _ID.match(motion_id):
+            raise ConfigurationError(
+                f"motion id {motion_id!r}: ids are 1-128 letters, digits, '.', '_' or '-', "
+                "starting with a letter or digit (they name the output files)"
+            )
+        options = {k: v for k, v in data.items() if k != "id"}
+        base = Path.cwd() if folder is None else folder
+        for key in PATH_OPTIONS:
+            if isinstance(options.get(key), str) and options[key]:
+                options[key] = str((base / Path(options[key]).expanduser()).resolve())
+        return cls(motion_id, options)
+
+    def argv(self) -> list[str]:
+        """The request as ``nearopt plan`` arguments.
+
+        Raises
+        ------
+        ConfigurationError
+            An output option, or a value that is not a JSON scalar, list or list of lists.
+        """
+        from .cli import plan_options
+
+        known = plan_options()
+        argv = ["plan", "--quiet"]
+        for key, value in self.options.items():
+            if key in OUTPUT_OPTIONS:
+                raise ConfigurationError(
+                    f"option {key!r}: a batch writes every motion as DIR/<id>.json itself"
+                )
+            if key not in known:
+                raise ConfigurationError(
+                    f"unknown option {key!r} (the options of `nearopt plan` without dashes, "
+                    f"'-' as '_': {', '.join(k for k in known if k not in OUTPUT_OPTIONS)})"
+                )
+            flag = "--" + key.replace("_", "-")
+            if value is True:
+                argv.append(flag)
+            elif value is False or value is None:
+                continue
+            elif isinstance(value, list) and value and all(isinstance(v, list) for v in value):
+                for item in value:  # a repeated option (via)
+                    argv += [flag, *map(_scalar, item)]
+            elif isinstance(value, list):
+                argv += [flag, *map(_scalar, value)] if value else [flag]
+            else:
+                argv += [flag, _scalar(value)]
+        return argv
+
+    def fingerprint(self) -> str:
+        """The request as canonical JSON: a written motion counts as done only for the same."""
+        return json.dumps({"id": self.id, **self.options}, sort_keys=True)
+
+
+def _scalar(value: object) -> str:
+    if isinstance(value, bool) or not isinstance(value, str | int | float):
+        raise ConfigurationError(
+            f"option values are numbers, strings, or lists of them; got {value!r:.60}"
+        )
+    return repr(value) if isinstance(value, float) else str(value)
+
+
+class OutcomeStatus(StrEnum):
+    """Whether a motion of a batch was planned."""
+
+    PLANNED = "planned"
+    """Planned and verified: the document holds the motion."""
+    FAILED = "failed"
+    """Not planned: the error says why (infeasible, unreachable, a bad option, …)."""
+
+
+@dataclass(frozen=True)
+class MotionOutcome:
+    """What became of one motion.
+
+    Attributes
+    ----------
+    id
+        The request's id.
+    status
+        Planned or failed.
+    stop
+        Why its planner stopped (a :class:`~nearopt.StopReason` value), when planned.
+    J, te
+        Its cost and duration [s], when planned.
+    iterations
+        Stage-2 iterations (summed over a task's segments), when planned.
+    wall_time
+        Seconds its worker spent on it (loading the robot included, the first time).
+    error
+        ``ErrorType: message`` when it failed.
+    warnings
+        Warnings about the planned motion (e.g. samples too sparse for a short phase).
+    document
+        The JSON text of ``DIR/<id>.json`` (planned) or of ``DIR/<id>.failed.json``.
+    result
+        The plan itself (:class:`~nearopt.PlanResult` or :class:`~nearopt.TaskResult`) when it
+        was asked for (:func:`plan_many`) and planned.
+    """
+
+    id: str
+    status: OutcomeStatus
+    stop: str | None = None
+    J: float | None = None  # noqa: N815 - the paper's name
+    te: float | None = None
+    iterations: int | None = None
+    wall_time: float = 0.0
+    error: str | None = None
+    warnings: tuple[str, ...] = ()
+    document: str = field(default="", repr=False)
+    result: PlanResult | TaskResult | None = field(default=None, repr=False)
+
+    def row(self) -> dict[str, str]:
+        """Its line of ``summary.csv``."""
+        planned = self.status == OutcomeStatus.PLANNED
+        return {
+            "id": self.id,
+            "status": str(self.stop if planned else self.status),
+            "J": repr(self.J) if self.J is not None else "",
+            "te": repr(self.te) if self.te is not None else "",
+            "iterations": "" if self.iterations is None else str(self.iterations),
+            "wall_time": f"{self.wall_time:.3f}",
+            "error": self.error or "",
+        }
+
+
+# --------------------------------------------------------------------------------------------
+# one motion, in a worker
+
+
+def plan_request(request: MotionRequest, rate: float = 1000.0,
+                 keep_result: bool = False) -> MotionOutcome:
+    """Plan, verify and write out one motion as ``nearopt plan`` would (in this process).
+
+    Every error a motion can cause (a bad option, an infeasible request, a failed verification)
+    is its outcome's ``error``, not an exception.
+    """
+    from . import cli
+    from .export import check_sampling, json_text
+
+    t0 = time.perf_counter()
+    try:
+        argv = request.argv()
+        if "rate" not in request.options:  # the batch's rate, unless the motion sets its own
+            argv += ["--rate", repr(float(rate))]
+        args = cli.parse_plan(argv)
+        prepared = cli.prepare(args, robot_loader=_cached_robot)
+        result = cli.solve(prepared, args)
+        cli.check(result, prepared, args).raise_if_failed()
+        segments = getattr(result, "segments", None)
+        iterations = (sum(len(s.history) - 1 for s in segments) if segments is not None
+                      else len(result.history) - 1)
+        wall = time.perf_counter() - t0
+        with warnings.catch_warnings(record=True) as caught:  # kept with the motion
+            warnings.simplefilter("always", SamplingWarning)
+            check_sampling(result, args.rate)
+        notes = list(dict.fromkeys(str(w.message) for w in caught))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", SamplingWarning)
+            text = json_text(result, args.rate, extra={
+                "id": request.id,
+                "request": json.loads(request.fingerprint()),
+                "batch": {"status": str(result.status), "iterations": iterations,
+                          "wall_time": wall, "warnings": notes},
+            })
+    except (NearoptError, OSError) as exc:
+        error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+        document = json.dumps({"id": request.id, "request": json.loads(request.fingerprint()),
+                               "error": error})
+        return MotionOutcome(request.id, OutcomeStatus.FAILED, error=error,
+                             wall_time=time.perf_counter() - t0, document=document)
+    return MotionOutcome(
+        request.id, OutcomeStatus.PLANNED, stop=str(result.status), J=float(result.J),
+        te=float(result.duration), iterations=iterations, wall_time=wall, warnings=tuple(notes),
+        document=text, result=result if keep_result else None,
+    )
+
+
+_robots: dict[tuple[object, ...], object] = {}
+_robots_lock = threading.Lock()
+
+
+def _cached_robot(key: tuple[object, ...], load: Callable[[], object]) -> object:
+    """A worker's robots, loaded once per process and thread (a Robot keeps Pinocchio data,
+    which two threads must not share)."""
+    key = (threading.get_ident(), *key)
+    with _robots_lock:
+        robot = _robots.get(key)
+    if robot is None:
+        robot = load()
+        with _robots_lock:
+            _robots[key] = robot
+    return robot
+
+
+# --------------------------------------------------------------------------------------------
+# where motions run
+
+
+class Pool:
+    """Where the motions of a batch run: submit motions, get their outcomes as they finish."""
+
+    workers: int
+
+    def run(self, requests: Sequence[MotionRequest], rate: float,
+            keep_result: bool) -> Iterator[MotionOutcome]:  # pragma: no cover - interface
+        """Plan every request; yield the outcomes in the order they finish."""
+        raise NotImplementedError
+
+    def close(self, abort: bool = False) -> None:
+        """Release the workers (or the connection); ``abort``: stop what runs now."""
+
+    def __enter__(self) -> Pool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class LocalPool(Pool):
+    """One worker process per core of this machine (:mod:`concurrent.futures`, spawned fresh,
+    one BLAS thread each). A worker that dies (killed, out of memory) is replaced and the motions
+    it held are run again, up to :data:`MAX_ATTEMPTS` times each.
+
+    Parameters
+    ----------
+    workers
+        Worker processes (default: the number of cores).
+    """
+
+    def __init__(self, workers: int | None = None) -> None:
+        count = (os.cpu_count() or 1) if workers is None else workers
+        if not isinstance(count, int) or isinstance(count, bool) or count < 1:
+            raise ConfigurationError(f"workers must be a positive integer, got {workers!r}")
+        self.workers = count
+        self._executor: cf.ProcessPoolExecutor | None = None
+
+    def _start(self) -> cf.ProcessPoolExecutor:
+        if self._executor is None:
+            self._executor = cf.ProcessPoolExecutor(
+                self.workers, mp_context=multiprocessing.get_context("spawn"),
+                initializer=_worker_start,
+            )
+        return self._executor
+
+    def processes(self) -> list[int]:
+        """The worker processes' ids (those started so far)."""
+        executor = self._executor
+        return [] if executor is None else list(executor._processes)  # noqa: SLF001
+
+    def run(self, requests: Sequence[MotionRequest], rate: float,
+            keep_result: bool) -> Iterator[MotionOutcome]:
+        attempts = dict.fromkeys((r.id for r in requests), 0)
+        order = {r.id: k for k, r in enumerate(requests)}
+        pending = list(requests)
+        while pending:
+            executor = self._start()
+            futures = {executor.submit(plan_request, r, rate, keep_result): r for r in pending}
+            for r in pending:
+                attempts[r.id] += 1
+            pending = []
+            broken = False
+            for future in cf.as_completed(futures):
+                request = futures[future]
+                try:
+                    yield future.result()
+                except cf.process.BrokenProcessPool:
+                    broken = True
+                    if attempts[request.id] >= MAX_ATTEMPTS:
+                        yield _died(request, attempts[request.id])
+                    else:
+                        pending.append(request)
+            if broken:  # a worker died: a fresh pool runs what was lost
+                self._executor.shutdown(wait=False, cancel_futures=True)
+                self._executor = None
+            pending.sort(key=lambda r: order[r.id])
+
+    def close(self, abort: bool = False) -> None:
+        executor, self._executor = self._executor, None
+        if executor is None:
+            return
+        if abort:  # Ctrl-C: the workers go now, not after their motions
+            for process in list(executor._processes.values()):  # noqa: SLF001
+                process.terminate()
+        executor.shutdown(wait=True, cancel_futures=True)
+
+
+def _worker_start() -> None:
+    """A local worker: Ctrl-C is the parent's to handle (it cancels what is left)."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
+def _died(request: MotionRequest, attempts: int) -> MotionOutcome:
+    error = (f"WorkerDied: the worker process planning it died {attempts} times (killed, out of "
+             "memory, or a crash in a native library)")
+    return MotionOutcome(request.id, OutcomeStatus.FAILED, error=error,
+                         document=json.dumps({"id": request.id, "error": error}))
+
+
+class DaskPool(Pool):
+    """The workers of a ``dask.distributed`` scheduler (``pip install 'nearopt[batch]'``;
+    the workers need nearopt installed, and any URDF, scene or task file at the same path).
+
+    The scheduler re-runs the tasks of a worker that dies (up to its ``allowed-failures``,
+    then the motion is recorded as failed).
+
+    Parameters
+    ----------
+    address
+        The scheduler, e.g. ``tcp://10.0.0.5:8786``; or a ready ``distributed.Client``.
+    timeout
+        Seconds to wait for the connection.
+    """
+
+    def __init__(self, address: str | object, timeout: float = 30.0) -> None:
+        try:
+            import distributed
+        except ImportError:
+            raise ConfigurationError(
+                "--scheduler needs Dask: pip install 'nearopt[batch]' (dask[distributed])"
+            ) from None
+        self._distributed = distributed
+        if isinstance(address, distributed.Client):
+            self.client, self._own = address, False
+        else:
+            try:
+                self.client = distributed.Client(address, timeout=timeout)
+            except (OSError, TimeoutError, ValueError) as exc:
+                raise ConfigurationError(
+                    f"cannot connect to the Dask scheduler at {address}: {exc}"
+                ) from None
+            self._own = True
+        self.workers = max(1, sum(
+            w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()
+        ))
+
+    def run(self, requests: Sequence[MotionRequest], rate: float,
+            keep_result: bool) -> Iterator[MotionOutcome]:
+        distributed = self._distributed
+        futures = {
+            self.client.submit(plan_request, r, rate, keep_result, pure=False,
+                               key=f"nearopt-{r.id}-{time.time_ns()}"): r
+            for r in requests
+        }
+        try:
+            for future in distributed.as_completed(futures):
+                request = futures[future]
+                try:
+                    yield future.result()
+                except distributed.KilledWorker:
+                    yield _died(request, MAX_ATTEMPTS)
+        finally:
+            self.client.cancel(list(futures))
+
+    def close(self, abort: bool = False) -> None:
+        if self._own:
+            self.client.close()
+
+
+# --------------------------------------------------------------------------------------------
+# the batch
+
+
+def read_requests(path: str | Path) -> list[MotionRequest]:
+    """The motions of a JSON Lines file, one object per line (blank lines and lines starting
+    with ``#`` skipped); relative file paths are read from the file's folder.
+
+    Raises
+    ------
+    ConfigurationError
+        A missing file, a line that is not a JSON object (naming the line), a bad or repeated id.
+    """
+    path = Path(path).expanduser().resolve()
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigurationError(f"cannot read the motions file {path}: "
+                                 f"{getattr(exc, 'strerror', None) or exc}") from None
+    requests: list[MotionRequest] = []
+    seen: dict[str, int] = {}
+    for number, line in enumerate(text.splitlines(), start=1):
+        if not line.strip() or line.lstrip().startswith("#"):
+            continue
+        try:
+            data = json.loads(line)
+        except json.JSONDecodeError as exc:
+            raise ConfigurationError(f"{path}, line {number}: not JSON ({exc})") from None
+        try:
+            request = MotionRequest.from_dict(data, f"line{number}", path.parent)
+        except ConfigurationError as exc:
+            raise ConfigurationError(f"{path}, line {number}: {exc}") from None
+        if request.id in seen:
+            raise ConfigurationError(f"{path}, line {number}: id {request.id!r} repeats line "
+                                     f"{seen[request.id]}")
+        seen[request.id] = number
+        requests.append(request)
+    if not requests:
+        raise ConfigurationError(f"{path}: no motions (one JSON object per line)")
+    return requests
+
+
+def _requests(requests: Iterable[MotionRequest | Mapping[str, Any]]) -> list[MotionRequest]:
+    out, seen = [], set()
+    for k, r in enumerate(requests):
+        request = r if isinstance(r, MotionRequest) else MotionRequest.from_dict(r, f"m{k}")
+        if request.id in seen:
+            raise ConfigurationError(f"motion id {request.id!r} appears twice")
+        seen.add(request.id)
+        out.append(request)
+    return out
+
+
+def _pool(client: object | None, workers: int | None) -> Pool:
+    if client is None:
+        return LocalPool(workers)
+    if isinstance(client, Pool):
+        return client
+    if workers is not None:
+        raise ConfigurationError("workers applies to this machine's pool, not to a Dask client")
+    return DaskPool(client)
+
+
+def plan_many(
+    requests: Iterable[MotionRequest | Mapping[str, Any]],
+    client: object | None = None,
+    *,
+    workers: int | None = None,
+    rate: float = 1000.0,
+) -> list[MotionOutcome]:
+    """Plan many motions in parallel; their outcomes in request order, each with its plan.
+
+    Parameters
+    ----------
+    requests
+        :class:`MotionRequest` records, or dicts of ``id`` (default ``m<k>``) and the options of
+        ``nearopt plan`` (see the module docstring; relative paths from the working folder).
+    client
+        None: this machine's cores (:class:`LocalPool`); a ``distributed.Client`` or a scheduler
+        address: that cluster (:class:`DaskPool`); or a :class:`Pool`.
+    workers
+        Worker processes of the local pool (default: one per core).
+    rate
+        The samples' rate of the JSON documents [Hz].
+    """
+    requests = _requests(requests)
+    order = {r.id: k for k, r in enumerate(requests)}
+    outcomes: list[MotionOutcome | None] = [None] * len(requests)
+    pool = _pool(client, workers)
+    own = pool is not client
+    aborted = True
+    try:
+        for outcome in pool.run(requests, rate, keep_result=True):
+            outcomes[order[outcome.id]] = outcome
+        aborted = False
+    finally:
+        if own:
+            pool.close(abort=aborted)
+    return outcomes  # type: ignore[return-value]
+
+
+@dataclass(frozen=True)
+class BatchSummary:
+    """How a batch went.
+
+    Attributes
+    ----------
+    outcomes
+        Every motion's outcome, in request order (those skipped as done read back from their
+        files, without ``document``).
+    skipped
+        Motions found done from an earlier run and not planned again.
+    wall_time
+        Seconds this run took.
+    """
+
+    outcomes: tuple[MotionOutcome, ...]
+    skipped: int
+    wall_time: float
+
+    @property
+    def failed(self) -> int:
+        """Motions that failed."""
+        return sum(o.status == OutcomeStatus.FAILED for o in self.outcomes)
+
+
+def run_batch(
+    requests: Sequence[MotionRequest],
+    out: str | Path,
+    client: object | None = None,
+    *,
+    workers: int | None = None,
+    rate: float = 1000.0,
+    retry_failed: bool = False,
+    progress: Callable[[int, int, int, int, float], None] | None = None,
+) -> BatchSummary:
+    """Plan every motion not already done and write its file; keep ``summary.csv`` current.
+
+    Parameters
+    ----------
+    requests
+        The motions (:func:`read_requests`).
+    out
+        The output folder (made if missing).
+    client, workers, rate
+        As :func:`plan_many`.
+    retry_failed
+        Plan again the motions an earlier run recorded as failed (default: skip them too).
+    progress
+        Called as results arrive with (done, failed, running, total, ETA [s]).
+    """
+    t0 = time.perf_counter()
+    folder = Path(out).expanduser()
+    if folder.exists() and not folder.is_dir():
+        raise ConfigurationError(f"--out {out}: it is a file, not a folder")
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigurationError(f"cannot make the folder {out}: {exc.strerror or exc}") from None
+    outcomes: dict[str, MotionOutcome] = {}
+    for request in requests:
+        done = _done(folder, request, retry_failed)
+        if done is not None:
+            outcomes[request.id] = done
+    skipped = len(outcomes)
+    todo = [r for r in requests if r.id not in outcomes]
+    _write_summary(folder, requests, outcomes)
+    total, started = len(requests), time.perf_counter()
+    if todo:
+        pool = _pool(client, workers)
+        own = pool is not client
+        aborted = True
+        try:
+            finished = 0
+            for outcome in pool.run(todo, rate, keep_result=False):
+                name = f"{outcome.id}.json" if outcome.status == OutcomeStatus.PLANNED else (
+                    f"{outcome.id}.failed.json")
+                write_atomically(folder / name, outcome.document)
+                stale = folder / (f"{outcome.id}.failed.json"
+                                  if outcome.status == OutcomeStatus.PLANNED
+                                  else f"{outcome.id}.json")
+                stale.unlink(missing_ok=True)
+                outcomes[outcome.id] = _light(outcome)
+                _write_summary(folder, requests, outcomes)
+                finished += 1
+                if progress is not None:
+                    elapsed = time.perf_counter() - started
+                    left = len(todo) - finished
+                    eta = elapsed / finished * left
+                    failed = sum(o.status == OutcomeStatus.FAILED for o in outcomes.values())
+                    progress(len(outcomes), failed, min(pool.workers, left), total, eta)
+            aborted = False
+        finally:
+            if own:
+                pool.close(abort=aborted)
+    return BatchSummary(tuple(outcomes[r.id] for r in requests if r.id in outcomes), skipped,
+                        time.perf_counter() - t0)
+
+
+def _light(outcome: MotionOutcome) -> MotionOutcome:
+    return MotionOutcome(outcome.id, outcome.status, outcome.stop, outcome.J, outcome.te,
+                         outcome.iterations, outcome.wall_time, outcome.error, outcome.warnings)
+
+
+def _done(folder: Path, request: MotionRequest, retry_failed: bool) -> MotionOutcome | None:
+    """The outcome an earlier run wrote for the same request, or None."""
+    wanted = json.loads(request.fingerprint())
+    for name, status in ((f"{request.id}.json", OutcomeStatus.PLANNED),
+                         (f"{request.id}.failed.json", OutcomeStatus.FAILED)):
+        if status == OutcomeStatus.FAILED and retry_failed:
+            continue
+        try:
+            document = json.loads((folder / name).read_text(encoding="utf-8"))
+        except (OSError, ValueError):
+            continue
+        if not isinstance(document, dict) or document.get("request") != wanted:
+            continue
+        if status == OutcomeStatus.FAILED:
+            return MotionOutcome(request.id, status, error=document.get("error"),
+                                 wall_time=0.0)
+        record = document.get("batch", {})
+        return MotionOutcome(request.id, status, stop=record.get("status"),
+                             J=document.get("J"), te=document.get("duration"),
+                             iterations=record.get("iterations"),
+                             wall_time=float(record.get("wall_time", 0.0)),
+                             warnings=tuple(record.get("warnings", ())))
+    return None
+
+
+def _write_summary(folder: Path, requests: Sequence[MotionRequest],
+                   outcomes: Mapping[str, MotionOutcome]) -> None:
+    buffer = io.StringIO()
+    writer = csv.DictWriter(buffer, SUMMARY_FIELDS, lineterminator="\n")
+    writer.writeheader()
+    for request in requests:
+        if request.id in outcomes:
+            writer.writerow(outcomes[request.id].row())
+    write_atomically(folder / "summary.csv", buffer.getvalue())
+
+
+def progress_line(stream: Any = None) -> Callable[[int, int, int, int, float], None]:
+    """A progress reporter: a bar rewritten in place on a terminal, else one line per result."""
+    stream = sys.stderr if stream is None else stream
+    tty = getattr(stream, "isatty", lambda: False)()
+
+    def report(done: int, failed: int, running: int, total: int, eta: float) -> None:
+        width = 24
+        bar = "#" * round(width * done / max(total, 1))
+        minutes, seconds = divmod(round(eta), 60)
+        line = (f"[{bar:<{width}}] {done}/{total} done, {failed} failed, {running} running, "
+                f"ETA {minutes}m{seconds:02d}s")
+        print(("\r" + line) if tty else line, end="" if tty else "\n", file=stream, flush=True)
+        if tty and done == total:
+            print(file=stream)
+
+    return report

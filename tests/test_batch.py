@@ -1,0 +1,270 @@
+"""Many motions (#13): ``nearopt batch`` and ``plan_many`` on this machine's processes and on a
+real Dask scheduler with two workers on 127.0.0.1; failures recorded, killed workers survived,
+interrupted batches resumed."""
+
+from __future__ import annotations
+
+import csv
+import json
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+from collections.abc import Iterator
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import load
+
+import nearopt
+from nearopt.batch import (
+    LocalPool,
+    MotionRequest,
+    OutcomeStatus,
+    plan_many,
+    read_requests,
+    run_batch,
+)
+
+BIN = Path(sys.executable).parent
+ARMS = ("two_link", "ur5", "panda")
+
+
+def motions(count_per_arm: int = 7, seed: int = 3) -> list[dict]:
+    """Seeded motions over three arms within 60 % of each range, and one the ur5 cannot lift."""
+    rng = np.random.default_rng(seed)
+    out = []
+    for name in ARMS:
+        robot = load(name)
+        lo = np.maximum(robot.limits.position_lower, -np.pi)
+        hi = np.minimum(robot.limits.position_upper, np.pi)
+        mid, half = 0.5 * (lo + hi), 0.3 * (hi - lo)
+        for k in range(count_per_arm):
+            q0, qe = rng.uniform(mid - half, mid + half, (2, robot.n))
+            out.append({"id": f"{name}-{k}", "robot": name, "q0": q0.round(4).tolist(),
+                        "qe": qe.round(4).tolist(), "beta": 0.001, "max_iterations": 2,
+                        "grid": 60})
+    out.append({"id": "too-weak", "robot": "ur5", "q0": [0, -1.2, 1.2, -1.5, -1.57, 0],
+                "qe": [0.5, -1.2, 1.2, -1.5, -1.57, 0], "effort_limit": [1.0]})
+    return out
+
+
+def write_motions(folder: Path, records: list[dict]) -> Path:
+    path = folder / "motions.jsonl"
+    path.write_text("# a motion table\n" + "\n".join(json.dumps(r) for r in records) + "\n")
+    return path
+
+
+def summary(folder: Path) -> list[dict[str, str]]:
+    with (folder / "summary.csv").open() as stream:
+        return list(csv.DictReader(stream))
+
+
+def batch(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
+    return subprocess.run([sys.executable, "-m", "nearopt.cli", "batch", *args, "--quiet"],
+                          capture_output=True, text=True, timeout=timeout)
+
+
+def without_wall_time(rows: list[dict[str, str]]) -> list[dict[str, str]]:
+    return [{k: v for k, v in row.items() if k != "wall_time"} for row in rows]
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+    """A dask scheduler and two single-threaded workers (with nannies) on 127.0.0.1."""
+    distributed = pytest.importorskip("distributed")
+    folder = tmp_path_factory.mktemp("dask")
+    port = free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    logs = [open(folder / f"{name}.log", "w") for name in ("scheduler", "w1", "w2")]  # noqa: SIM115
+    processes = [subprocess.Popen(
+        [str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(port),
+         "--no-dashboard"], stdout=logs[0], stderr=subprocess.STDOUT, cwd=folder)]
+    try:
+        for log in logs[1:]:
+            processes.append(subprocess.Popen(
+                [str(BIN / "dask"), "worker", address, "--nthreads", "1", "--nworkers", "1",
+                 "--no-dashboard", "--host", "127.0.0.1"],
+                stdout=log, stderr=subprocess.STDOUT, cwd=folder))
+        client = distributed.Client(address, timeout=60)
+        client.wait_for_workers(2, timeout=120)
+        yield {"address": address, "client": client, "workers": processes[1:]}
+        client.close()
+    finally:
+        for process in processes[::-1]:
+            process.terminate()
+        for process in processes:
+            try:
+                process.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                process.kill()
+        for log in logs:
+            log.close()
+
+
+@pytest.fixture(scope="module")
+def local_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The batch on this machine's default pool (a process per core)."""
+    folder = tmp_path_factory.mktemp("local")
+    tasks = write_motions(folder, motions())
+    run = batch(str(tasks), "--out", str(folder / "out"))
+    assert run.returncode == 1, run.stderr  # the infeasible motion failed, the rest planned
+    assert "22 motions: 21 planned, 1 failed" in run.stdout
+    return tasks, folder / "out"
+
+
+def test_a_local_batch_plans_every_motion_and_records_the_failure(
+    local_run: tuple[Path, Path],
+) -> None:
+    tasks, out = local_run
+    rows = summary(out)
+    assert [r["id"] for r in rows] == [r["id"] for r in motions()]
+    failed = [r for r in rows if r["status"] == "failed"]
+    assert [r["id"] for r in failed] == ["too-weak"]
+    assert "InfeasiblePathError" in failed[0]["error"] and "shoulder_lift_joint" in failed[0][
+        "error"]
+    assert json.loads((out / "too-weak.failed.json").read_text())["error"] == failed[0]["error"]
+    requests = {r["id"]: r for r in motions()}
+    for row in rows:
+        if row["status"] == "failed":
+            continue
+        doc = json.loads((out / f"{row['id']}.json").read_text())
+        assert doc["id"] == row["id"] and doc["request"] == requests[row["id"]]
+        assert float(row["J"]) == doc["J"] and float(row["te"]) == doc["duration"]
+        np.testing.assert_allclose(doc["q"][0], requests[row["id"]]["q0"], atol=1e-12)
+        np.testing.assert_allclose(doc["q"][-1], requests[row["id"]]["qe"], atol=1e-9)
+        np.testing.assert_allclose(doc["qd"][-1], 0.0, atol=1e-9)
+        limits = load(doc["robot"]).limits
+        assert np.all(np.abs(doc["tau"]) <= np.maximum(-limits.effort_lower,
+                                                       limits.effort_upper) * (1 + 1e-6))
+
+
+def test_a_dask_cluster_gives_the_same_summary(cluster: dict,
+                                               local_run: tuple[Path, Path]) -> None:
+    tasks, local_out = local_run
+    out = tasks.parent / "dask-out"
+    run = batch(str(tasks), "--out", str(out), "--scheduler", cluster["address"])
+    assert run.returncode == 1, run.stderr
+    assert without_wall_time(summary(out)) == without_wall_time(summary(local_out))
+    same = json.loads((out / "ur5-3.json").read_text())
+    assert same["q"] == json.loads((local_out / "ur5-3.json").read_text())["q"]
+
+
+def test_a_worker_killed_mid_batch_loses_no_motion(cluster: dict, tmp_path: Path) -> None:
+    """SIGKILL to a Dask worker process while it plans: the scheduler runs its task elsewhere;
+    every motion is written once."""
+    psutil = pytest.importorskip("psutil")
+    requests = [MotionRequest.from_dict(r, r["id"]) for r in motions(5, seed=5)]
+    killed = []
+
+    def kill_once(done: int, failed: int, running: int, total: int, eta: float) -> None:
+        if killed:
+            return
+        nanny = psutil.Process(cluster["workers"][0].pid)
+        for child in nanny.children(recursive=True):
+            child.send_signal(signal.SIGKILL)
+            killed.append(child.pid)
+
+    result = run_batch(requests, tmp_path, cluster["client"], progress=kill_once)
+    assert killed
+    rows = summary(tmp_path)
+    assert [r["id"] for r in rows] == [r.id for r in requests]
+    assert [r["id"] for r in rows if r["status"] == "failed"] == ["too-weak"]
+    assert result.failed == 1 and len(result.outcomes) == len(requests)
+    for request in requests[:-1]:
+        assert json.loads((tmp_path / f"{request.id}.json").read_text())["id"] == request.id
+
+
+def test_a_dead_local_worker_is_replaced_and_its_motions_rerun(tmp_path: Path) -> None:
+    requests = [MotionRequest.from_dict(r, r["id"]) for r in motions(2, seed=7)[:-1]]
+    pool = LocalPool(2)
+    killed = []
+
+    def kill_once(done: int, failed: int, running: int, total: int, eta: float) -> None:
+        if not killed:
+            pid = pool.processes()[0]
+            os.kill(pid, signal.SIGKILL)
+            killed.append(pid)
+
+    with pool:
+        result = run_batch(requests, tmp_path, pool, progress=kill_once)
+    assert killed and result.failed == 0
+    assert sorted(p.name for p in tmp_path.glob("*.json")) == sorted(
+        f"{r.id}.json" for r in requests)
+
+
+def test_an_interrupted_batch_resumes_without_replanning(tmp_path: Path) -> None:
+    tasks = write_motions(tmp_path, motions(4, seed=11))
+    out = tmp_path / "out"
+    process = subprocess.Popen(
+        [sys.executable, "-m", "nearopt.cli", "batch", str(tasks), "--out", str(out),
+         "--workers", "2", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 300
+    while time.time() < deadline and len(list(out.glob("*.json"))) < 3:
+        time.sleep(0.05)
+    process.send_signal(signal.SIGINT)
+    _, stderr = process.communicate(timeout=120)
+    assert process.returncode == 130, stderr
+    assert "interrupted" in stderr and "Traceback" not in stderr
+    first = {p.name: p.stat().st_mtime_ns for p in out.glob("*.json")}
+    assert 3 <= len(first) < 13
+    assert not list(out.glob(".*")), "no half-written file is left"
+    rows = summary(out)
+    assert {r["id"] + (".json" if r["status"] != "failed" else ".failed.json")
+            for r in rows} == set(first)
+    run = batch(str(tasks), "--out", str(out))
+    assert f"({len(first)} done before, skipped)" in run.stdout
+    assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.json") if p.name in first} == first
+    assert [r["id"] for r in summary(out)] == [r["id"] for r in motions(4, seed=11)]
+
+
+def test_plan_many_returns_the_plans_in_request_order() -> None:
+    records = [{"robot": "two_link", "q0": [0.7, -1.5], "qe": qe, "max_iterations": 1}
+               for qe in ([-1.5, 0.0], [0.3, 0.2], [1.0, -0.5])]
+    records.insert(1, {"id": "wrong", "robot": "two_link", "q0": [0, 0], "qe": [1, 2, 3]})
+    outcomes = plan_many(records, workers=2)
+    assert [o.id for o in outcomes] == ["m0", "wrong", "m2", "m3"]
+    assert outcomes[1].status == OutcomeStatus.FAILED and "qe" in outcomes[1].error
+    robot = load("two_link")
+    for outcome, record in zip(outcomes[::2] + outcomes[3:], records[::2] + records[3:],
+                               strict=True):
+        assert outcome.status == OutcomeStatus.PLANNED
+        assert isinstance(outcome.result, nearopt.PlanResult)
+        np.testing.assert_allclose(outcome.result.trajectory(outcome.te, 0)[0], record["qe"],
+                                   atol=1e-9)
+        report = nearopt.verify(outcome.result.trajectory, robot, q0=record["q0"],
+                                qe=record["qe"], cost=outcome.result.cost, J=outcome.J)
+        assert report.passed, str(report)
+
+
+def test_bad_motion_files_are_one_line_errors(tmp_path: Path) -> None:
+    cases = {
+        '{"id": "a", "robot": "ur5"}\n{"id": "a", "robot": "ur5"}\n': "id 'a' repeats line 1",
+        '{"id": "../x"}\n': "ids are",
+        "[1, 2]\n": "a motion is a JSON object",
+        "{oops\n": "line 1: not JSON",
+        "\n# nothing\n": "no motions",
+    }
+    for text, message in cases.items():
+        (tmp_path / "m.jsonl").write_text(text)
+        with pytest.raises(nearopt.ConfigurationError, match=message.replace("(", r"\(")):
+            read_requests(tmp_path / "m.jsonl")
+        run = batch(str(tmp_path / "m.jsonl"), "--out", str(tmp_path / "out"), timeout=120)
+        assert run.returncode == 2 and "Traceback" not in run.stderr
+    for options, message in (({"json": "x.json"}, "writes every motion"),
+                             ({"colour": 1}, "unknown option 'colour'"),
+                             ({"q0": {"a": 1}}, "option values")):
+        with pytest.raises(nearopt.ConfigurationError, match=message):
+            MotionRequest("m", options).argv()
+    (tmp_path / "file").write_text("")
+    with pytest.raises(nearopt.ConfigurationError, match="not a folder"):
+        run_batch([MotionRequest("m", {})], tmp_path / "file")
