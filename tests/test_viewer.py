@@ -306,3 +306,28 @@ def test_the_exported_page_marks_a_goal_pose_with_a_triad(tmp_path: Path) -> Non
         shown = np.reshape(page.evaluate(PLACEMENT, ["meshcat", "targets", "target0"]), (4, 4))
         browser.close()
     np.testing.assert_allclose(shown, goal.placement().homogeneous, atol=1e-9)
+
+
+def test_the_page_of_a_task_marks_every_target(tmp_path: Path) -> None:
+    """A task's page: a triad at each target (a joint target: the tip's placement there) and
+    none more; the animation lasts the whole task."""
+    playwright = pytest.importorskip("playwright.sync_api")
+    robot = load("panda")
+    stop = np.array([0.4, -0.3, 0.2, -2.2, 0.1, 1.9, 0.6])
+    goal = nearopt.ToolPose((0.5, 0.2, 0.3), (1.0, 0.0, 0.0, 0.0))
+    result = nearopt.plan_task(robot, [0, -0.5, 0, -2, 0, 1.5, 0.8],
+                               [nearopt.Target(stop, name="stop"), goal], grid=60,
+                               max_iterations=1)
+    html = export_html(result, tmp_path / "task.html")
+    with playwright.sync_playwright() as p:
+        browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
+        page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
+        _open(page, html.resolve().as_uri(), len(robot.visual_model().geometryObjects))
+        shown = [np.reshape(page.evaluate(PLACEMENT, ["meshcat", "targets", f"target{k}"]),
+                            (4, 4)) for k in range(2)]
+        names = page.evaluate(
+            "(path) => Object.keys(viewer.scene_tree.find(path).children)", ["meshcat", "targets"])
+        browser.close()
+    np.testing.assert_allclose(shown[0], robot.frame_placement(stop).homogeneous, atol=1e-9)
+    np.testing.assert_allclose(shown[1], goal.placement().homogeneous, atol=1e-9)
+    assert sorted(names) == ["target0", "target1"]
