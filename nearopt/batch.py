@@ -15,15 +15,17 @@ worker that dies). Each worker process loads a robot once and keeps it for the m
 follow.
 
 :func:`run_batch` (``nearopt batch TASKS --out DIR``) writes ``DIR/<id>.json`` per motion planned
-(``DIR/<id>.failed.json`` with the error per motion that failed) and ``DIR/summary.csv`` as the
+(``DIR/failed/<id>.json`` with the error per motion that failed) and ``DIR/summary.csv`` as the
 results arrive, every file atomically; run again, it skips the motions whose files hold the same
-request. :func:`plan_many` returns the plans themselves, in request order.
+request (the same options, the same contents of the files they name, the same rate).
+:func:`plan_many` returns the plans themselves, in request order.
 """
 
 from __future__ import annotations
 
 import concurrent.futures as cf
 import csv
+import hashlib
 import io
 import json
 import multiprocessing
@@ -40,7 +42,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .errors import ConfigurationError, NearoptError, SamplingWarning
-from .outputs import write_atomically
+from .outputs import resolve_output, write_atomically, write_outputs
 
 if TYPE_CHECKING:
     from .planning import PlanResult, TaskResult
@@ -106,7 +108,7 @@ class MotionRequest:
                 f"motion id {motion_id!r}: ids are 1-128 letters, digits, '.', '_' or '-', "
                 "starting with a letter or digit (they name the output files)"
             )
-        options = {k: v for k, v in data.items() if k != "id"}
+        options = {k: _plain(v) for k, v in data.items() if k != "id"}
         base = Path.cwd() if folder is None else folder
         for key in PATH_OPTIONS:
             if isinstance(options.get(key), str) and options[key]:
@@ -121,12 +123,12 @@ class MotionRequest:
         ConfigurationError
             An output option, or a value that is not a JSON scalar, list or list of lists.
         """
-        from .cli import plan_options
+        from .cli import plan_options, repeatable_options
 
-        known = plan_options()
+        known, repeatable = plan_options(), repeatable_options()
         argv = ["plan", "--quiet"]
         for key, value in self.options.items():
-            if key in OUTPUT_OPTIONS:
+            if key in OUTPUT_OPTIONS and value not in (False, None):
                 raise ConfigurationError(
                     f"option {key!r}: a batch writes every motion as DIR/<id>.json itself"
                 )
@@ -140,7 +142,12 @@ class MotionRequest:
                 argv.append(flag)
             elif value is False or value is None:
                 continue
-            elif isinstance(value, list) and value and all(isinstance(v, list) for v in value):
+            elif key in repeatable and isinstance(value, list):
+                if not all(isinstance(v, list) for v in value):
+                    raise ConfigurationError(
+                        f"option {key!r} is a list of lists (one per {key} point), got "
+                        f"{value!r:.60}"
+                    )
                 for item in value:  # a repeated option (via)
                     argv += [flag, *map(_scalar, item)]
             elif isinstance(value, list):
@@ -149,9 +156,28 @@ class MotionRequest:
                 argv += [flag, _scalar(value)]
         return argv
 
-    def fingerprint(self) -> str:
-        """The request as canonical JSON: a written motion counts as done only for the same."""
-        return json.dumps({"id": self.id, **self.options}, sort_keys=True)
+    def fingerprint(self, rate: float = 1000.0) -> str:
+        """The request as canonical JSON, with the SHA-256 of every file it names and the
+        samples' rate: a written motion counts as done only for the same."""
+        files = {}
+        for key in PATH_OPTIONS:
+            name = self.options.get(key)
+            if isinstance(name, str) and name:
+                try:
+                    files[key] = hashlib.sha256(Path(name).read_bytes()).hexdigest()
+                except OSError:
+                    files[key] = None
+        return json.dumps({"id": self.id, **self.options, "file_sha256": files,
+                           "batch_rate": float(rate)}, sort_keys=True)
+
+
+def _plain(value: object) -> object:
+    """NumPy arrays and scalars, tuples: as the JSON values they stand for."""
+    if hasattr(value, "tolist") and callable(value.tolist):  # numpy array or scalar
+        value = value.tolist()
+    if isinstance(value, tuple | list):
+        return [_plain(v) for v in value]
+    return value
 
 
 def _scalar(value: object) -> str:
@@ -194,7 +220,7 @@ class MotionOutcome:
     warnings
         Warnings about the planned motion (e.g. samples too sparse for a short phase).
     document
-        The JSON text of ``DIR/<id>.json`` (planned) or of ``DIR/<id>.failed.json``.
+        The JSON text of ``DIR/<id>.json`` (planned) or of ``DIR/failed/<id>.json``.
     result
         The plan itself (:class:`~nearopt.PlanResult` or :class:`~nearopt.TaskResult`) when it
         was asked for (:func:`plan_many`) and planned.
@@ -267,10 +293,11 @@ def plan_request(request: MotionRequest, rate: float = 1000.0,
             })
     except (NearoptError, OSError) as exc:
         error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
-        document = json.dumps({"id": request.id, "request": json.loads(request.fingerprint()),
-                               "error": error})
-        return MotionOutcome(request.id, OutcomeStatus.FAILED, error=error,
-                             wall_time=time.perf_counter() - t0, document=document)
+        wall = time.perf_counter() - t0
+        document = json.dumps({"id": request.id, "request": json.loads(request.fingerprint(rate)),
+                               "error": error, "wall_time": wall})
+        return MotionOutcome(request.id, OutcomeStatus.FAILED, error=error, wall_time=wall,
+                             document=document)
     return MotionOutcome(
         request.id, OutcomeStatus.PLANNED, stop=str(result.status), J=float(result.J),
         te=float(result.duration), iterations=iterations, wall_time=wall, warnings=tuple(notes),
@@ -514,6 +541,11 @@ def _requests(requests: Iterable[MotionRequest | Mapping[str, Any]]) -> list[Mot
     return out
 
 
+def _check_rate(rate: float) -> None:
+    if isinstance(rate, bool) or not isinstance(rate, int | float) or not 0 < rate <= 1e6:
+        raise ConfigurationError(f"rate must be a number of Hz in (0, 1e6], got {rate!r}")
+
+
 def _pool(client: object | None, workers: int | None) -> Pool:
     if client is None:
         return LocalPool(workers)
@@ -546,6 +578,7 @@ def plan_many(
     rate
         The samples' rate of the JSON documents [Hz].
     """
+    _check_rate(rate)
     requests = _requests(requests)
     order = {r.id: k for k, r in enumerate(requests)}
     outcomes: list[MotionOutcome | None] = [None] * len(requests)
@@ -613,6 +646,7 @@ def run_batch(
         Called as results arrive with (done, failed, running, total, ETA [s]).
     """
     t0 = time.perf_counter()
+    _check_rate(rate)
     folder = Path(out).expanduser()
     if folder.exists() and not folder.is_dir():
         raise ConfigurationError(f"--out {out}: it is a file, not a folder")
@@ -622,7 +656,7 @@ def run_batch(
         raise ConfigurationError(f"cannot make the folder {out}: {exc.strerror or exc}") from None
     outcomes: dict[str, MotionOutcome] = {}
     for request in requests:
-        done = _done(folder, request, retry_failed)
+        done = _done(folder, request, retry_failed, rate)
         if done is not None:
             outcomes[request.id] = done
     skipped = len(outcomes)
@@ -636,15 +670,16 @@ def run_batch(
         try:
             finished = 0
             for outcome in pool.run(todo, rate, keep_result=False):
-                name = f"{outcome.id}.json" if outcome.status == OutcomeStatus.PLANNED else (
-                    f"{outcome.id}.failed.json")
-                write_atomically(folder / name, outcome.document)
-                stale = folder / (f"{outcome.id}.failed.json"
-                                  if outcome.status == OutcomeStatus.PLANNED
-                                  else f"{outcome.id}.json")
-                stale.unlink(missing_ok=True)
+                planned = outcome.status == OutcomeStatus.PLANNED
+                name = _file(folder, outcome.id, planned)
+                _file(folder, outcome.id, not planned).unlink(missing_ok=True)  # stale
                 outcomes[outcome.id] = _light(outcome)
-                _write_summary(folder, requests, outcomes)
+                # the motion's file and the summary that lists it: both or neither (Ctrl-C)
+                if not planned:
+                    name.parent.mkdir(exist_ok=True)
+                write_outputs({resolve_output(name): outcome.document,
+                               resolve_output(folder / "summary.csv"):
+                               _summary_text(requests, outcomes)})
                 finished += 1
                 if progress is not None:
                     elapsed = time.perf_counter() - started
@@ -665,24 +700,29 @@ def _light(outcome: MotionOutcome) -> MotionOutcome:
                          outcome.iterations, outcome.wall_time, outcome.error, outcome.warnings)
 
 
-def _done(folder: Path, request: MotionRequest, retry_failed: bool) -> MotionOutcome | None:
+def _file(folder: Path, motion_id: str, planned: bool) -> Path:
+    """Where a motion's outcome is written: DIR/<id>.json, or DIR/failed/<id>.json."""
+    return folder / f"{motion_id}.json" if planned else folder / "failed" / f"{motion_id}.json"
+
+
+def _done(folder: Path, request: MotionRequest, retry_failed: bool,
+          rate: float) -> MotionOutcome | None:
     """The outcome an earlier run wrote for the same request, or None."""
-    wanted = json.loads(request.fingerprint())
-    for name, status in ((f"{request.id}.json", OutcomeStatus.PLANNED),
-                         (f"{request.id}.failed.json", OutcomeStatus.FAILED)):
-        if status == OutcomeStatus.FAILED and retry_failed:
+    wanted = json.loads(request.fingerprint(rate))
+    for planned in (True, False):
+        if not planned and retry_failed:
             continue
         try:
-            document = json.loads((folder / name).read_text(encoding="utf-8"))
+            document = json.loads(_file(folder, request.id, planned).read_text(encoding="utf-8"))
         except (OSError, ValueError):
             continue
         if not isinstance(document, dict) or document.get("request") != wanted:
             continue
-        if status == OutcomeStatus.FAILED:
-            return MotionOutcome(request.id, status, error=document.get("error"),
-                                 wall_time=0.0)
+        if not planned:
+            return MotionOutcome(request.id, OutcomeStatus.FAILED, error=document.get("error"),
+                                 wall_time=float(document.get("wall_time", 0.0)))
         record = document.get("batch", {})
-        return MotionOutcome(request.id, status, stop=record.get("status"),
+        return MotionOutcome(request.id, OutcomeStatus.PLANNED, stop=record.get("status"),
                              J=document.get("J"), te=document.get("duration"),
                              iterations=record.get("iterations"),
                              wall_time=float(record.get("wall_time", 0.0)),
@@ -692,13 +732,18 @@ def _done(folder: Path, request: MotionRequest, retry_failed: bool) -> MotionOut
 
 def _write_summary(folder: Path, requests: Sequence[MotionRequest],
                    outcomes: Mapping[str, MotionOutcome]) -> None:
+    write_atomically(folder / "summary.csv", _summary_text(requests, outcomes))
+
+
+def _summary_text(requests: Sequence[MotionRequest],
+                  outcomes: Mapping[str, MotionOutcome]) -> str:
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, SUMMARY_FIELDS, lineterminator="\n")
     writer.writeheader()
     for request in requests:
         if request.id in outcomes:
             writer.writerow(outcomes[request.id].row())
-    write_atomically(folder / "summary.csv", buffer.getvalue())
+    return buffer.getvalue()
 
 
 def progress_line(stream: Any = None) -> Callable[[int, int, int, int, float], None]:

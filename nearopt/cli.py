@@ -39,6 +39,7 @@ from .kinematics import ToolPose
 from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
 from .path import StraightPath
 from .planning import METHODS, Iteration, PlanResult, StopReason, Task, TaskResult, plan, plan_task
+from .planning.task import check_targets
 from .robot import Robot
 from .verify import VerificationError, VerificationReport, verify
 
@@ -50,9 +51,27 @@ if TYPE_CHECKING:
 __all__ = ["main", "plan_options", "parse_plan", "prepare", "solve", "check", "Prepared"]
 
 
+class _Once(argparse._StoreAction):  # noqa: SLF001 - argparse's own store action
+    """An option that may be given once: a second value is an error, not a silent override."""
+
+    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
+                 values: object, option_string: str | None = None) -> None:
+        given = namespace.__dict__.setdefault("_given", set())
+        if self.dest in given:
+            parser.error(f"{option_string} is given twice (options take one value list; "
+                         "--via repeats)")
+        given.add(self.dest)
+        super().__call__(parser, namespace, values, option_string)
+
+
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors are ConfigurationErrors (one line, exit code 2, no usage
-    dump; a batch records them as the motion's error)."""
+    dump; a batch records them as the motion's error); an option given twice is an error."""
+
+    def __init__(self, *args: object, **kwargs: object) -> None:
+        super().__init__(*args, **kwargs)  # type: ignore[arg-type]
+        self.register("action", None, _Once)
+        self.register("action", "store", _Once)
 
     def error(self, message: str) -> NoReturn:
         raise ConfigurationError(message)
@@ -222,6 +241,9 @@ def _check_request(args: argparse.Namespace) -> None:
         raise ConfigurationError("--frame applies to --goal-pose (a --task file gives its frame)")
     if args.task is None and args.q0 is None:
         raise ConfigurationError("give the start configuration, --q0")
+    if args.task is not None and args.deg and args.q0 is None:
+        raise ConfigurationError("--deg applies to --q0 (a --task file gives its units: "
+                                 "units = \"deg\")")
     if args.goal_pose is not None and len(args.goal_pose) not in (3, 7):
         raise ConfigurationError(
             f"--goal-pose takes x y z [m] or x y z qx qy qz qw, got {len(args.goal_pose)} numbers"
@@ -308,6 +330,15 @@ def plan_options() -> tuple[str, ...]:
     return tuple(sorted({o[2:].replace("-", "_") for o in names if o.startswith("--")} - {"help"}))
 
 
+def repeatable_options() -> tuple[str, ...]:
+    """The options of ``nearopt plan`` given once per value (``--via``): a batch's list of
+    lists."""
+    parser = _parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
+    return tuple(a.dest for a in sub.choices["plan"]._actions  # noqa: SLF001
+                 if isinstance(a, argparse._AppendAction))  # noqa: SLF001
+
+
 def parse_plan(argv: Sequence[str]) -> argparse.Namespace:
     """``nearopt plan`` arguments (``argv`` starts with ``"plan"``) as the command reads them.
 
@@ -364,10 +395,8 @@ def prepare(args: argparse.Namespace, robot_loader: RobotLoader | None = None) -
         robot.frame_id(args.frame)  # an unknown frame is named before any work
     elif args.qe is not None:
         qe = np.deg2rad(args.qe) if args.deg else np.asarray(args.qe)
-    else:  # every frame of the task is named before any work
-        for target in task.targets:  # type: ignore[union-attr]
-            if isinstance(target.goal, ToolPose):
-                robot.frame_id(target.goal.frame)
+    else:  # every target is checked before any work
+        check_targets(robot, task.targets, q0, where=str(task.source))  # type: ignore[union-attr]
     scene = Scene.from_file(args.scene) if args.scene is not None else None
     via = [np.deg2rad(v) if args.deg else np.asarray(v) for v in args.via]
     return Prepared(robot, q0, qe, task, scene, _cost(args), via)
@@ -445,7 +474,8 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
                        None if quiet else segment_progress)
     if isinstance(result, TaskResult):
         print(f"{result.status}: J = {result.J:.6f} (first paths {result.initial_J:.6f}), "
-              f"te = {result.duration:.4f} s, {len(result.segments)} segments, "
+              f"te = {result.duration:.4f} s, {len(result.segments)} "
+              f"segment{'s' if len(result.segments) > 1 else ''}, "
               f"{result.wall_time:.2f} s", file=out)
         names = iter(t.name for t in result.targets)
         for k, (t0, seg) in enumerate(zip(result.trajectory.starts, result.segments,

@@ -57,9 +57,10 @@ def json_text(result: PlanResult | TaskResult, rate: float = 1000.0,
     "q"}, …]`` when the motion passes via-points.
 
     A task (:class:`~nearopt.TaskResult`) has, instead of ``"history"`` and ``"via"``,
-    ``"targets": [{"name", "t", "q", "stop", "pose"}, …]`` (``"pose"``: position and quaternion
-    (x, y, z, w), or null) and ``"segments": [{"t_start", "t_end", "J", "status", "targets",
-    "history"}, …]``: the rest-to-rest pieces, whose boundaries are the targets stopped at.
+    ``"targets": [{"name", "t", "q", "stop", "pose", "frame"}, …]`` (``"pose"``: position and
+    quaternion (x, y, z, w), and the frame it places; null for a joint target) and
+    ``"segments": [{"t_start", "t_end", "J", "status", "targets", "history"}, …]``: the
+    rest-to-rest pieces, whose boundaries are the targets stopped at.
 
     ``extra`` keys come first (a batch's ``"id"``, ``"request"`` and ``"batch"`` record).
 
@@ -86,7 +87,9 @@ def json_text(result: PlanResult | TaskResult, rate: float = 1000.0,
         return json.dumps(document)
     document["targets"] = [
         {"name": target.name, "t": float(t), "q": q.tolist(), "stop": target.stop,
-         "pose": _pose(target.goal)}
+         "pose": _pose(target.goal),
+         "frame": (target.goal.frame or result.robot.tip) if isinstance(target.goal, ToolPose)
+         else None}
         for target, t, q in zip(result.targets, result.target_times,
                                 result.target_configurations, strict=True)
     ]

@@ -20,6 +20,7 @@ import pytest
 from conftest import load
 
 import nearopt
+import nearopt.cli
 from nearopt.batch import (
     LocalPool,
     MotionRequest,
@@ -132,13 +133,15 @@ def test_a_local_batch_plans_every_motion_and_records_the_failure(
     assert [r["id"] for r in failed] == ["too-weak"]
     assert "InfeasiblePathError" in failed[0]["error"] and "shoulder_lift_joint" in failed[0][
         "error"]
-    assert json.loads((out / "too-weak.failed.json").read_text())["error"] == failed[0]["error"]
+    assert json.loads((out / "failed" / "too-weak.json").read_text())["error"] == failed[0][
+        "error"]
     requests = {r["id"]: r for r in motions()}
     for row in rows:
         if row["status"] == "failed":
             continue
         doc = json.loads((out / f"{row['id']}.json").read_text())
-        assert doc["id"] == row["id"] and doc["request"] == requests[row["id"]]
+        assert doc["id"] == row["id"]
+        assert doc["request"] == {**requests[row["id"]], "file_sha256": {}, "batch_rate": 1000.0}
         assert float(row["J"]) == doc["J"] and float(row["te"]) == doc["duration"]
         np.testing.assert_allclose(doc["q"][0], requests[row["id"]]["q0"], atol=1e-12)
         np.testing.assert_allclose(doc["q"][-1], requests[row["id"]]["qe"], atol=1e-9)
@@ -203,33 +206,36 @@ def test_a_dead_local_worker_is_replaced_and_its_motions_rerun(tmp_path: Path) -
 
 
 def test_an_interrupted_batch_resumes_without_replanning(tmp_path: Path) -> None:
-    tasks = write_motions(tmp_path, motions(4, seed=11))
+    records = [dict(r, max_iterations=20) for r in motions(6, seed=11)]  # slower: time to stop
+    tasks = write_motions(tmp_path, records)
     out = tmp_path / "out"
     process = subprocess.Popen(
         [sys.executable, "-m", "nearopt.cli", "batch", str(tasks), "--out", str(out),
          "--workers", "2", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 300
-    while time.time() < deadline and len(list(out.glob("*.json"))) < 3:
-        time.sleep(0.05)
+    while time.time() < deadline and not list(out.glob("*.json")):
+        time.sleep(0.02)
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=120)
     assert process.returncode == 130, stderr
     assert "interrupted" in stderr and "Traceback" not in stderr
-    first = {p.name: p.stat().st_mtime_ns for p in out.glob("*.json")}
-    assert 3 <= len(first) < 13
-    assert not list(out.glob(".*")), "no half-written file is left"
-    rows = summary(out)
-    assert {r["id"] + (".json" if r["status"] != "failed" else ".failed.json")
-            for r in rows} == set(first)
+    first = {p.relative_to(out): p.stat().st_mtime_ns for p in out.glob("**/*.json")}
+    assert 1 <= len(first) < len(records)
+    assert not list(out.glob("**/.*")), "no half-written file is left"
+    rows = summary(out)  # the files and the summary are written together: they agree
+    written = {Path(r["id"] + ".json") if r["status"] != "failed" else
+               Path("failed", r["id"] + ".json") for r in rows}
+    assert written == set(first)
     run = batch(str(tasks), "--out", str(out))
     assert f"({len(first)} done before, skipped)" in run.stdout
-    assert {p.name: p.stat().st_mtime_ns for p in out.glob("*.json") if p.name in first} == first
-    assert [r["id"] for r in summary(out)] == [r["id"] for r in motions(4, seed=11)]
+    assert {p.relative_to(out): p.stat().st_mtime_ns for p in out.glob("**/*.json")
+            if p.relative_to(out) in first} == first
+    assert [r["id"] for r in summary(out)] == [r["id"] for r in records]
 
 
 def test_plan_many_returns_the_plans_in_request_order() -> None:
-    records = [{"robot": "two_link", "q0": [0.7, -1.5], "qe": qe, "max_iterations": 1}
-               for qe in ([-1.5, 0.0], [0.3, 0.2], [1.0, -0.5])]
+    records = [{"robot": "two_link", "q0": np.array([0.7, -1.5]), "qe": qe, "max_iterations": 1}
+               for qe in ([-1.5, 0.0], (0.3, 0.2), np.array([1.0, -0.5]))]
     records.insert(1, {"id": "wrong", "robot": "two_link", "q0": [0, 0], "qe": [1, 2, 3]})
     outcomes = plan_many(records, workers=2)
     assert [o.id for o in outcomes] == ["m0", "wrong", "m2", "m3"]
@@ -239,8 +245,8 @@ def test_plan_many_returns_the_plans_in_request_order() -> None:
                                strict=True):
         assert outcome.status == OutcomeStatus.PLANNED
         assert isinstance(outcome.result, nearopt.PlanResult)
-        np.testing.assert_allclose(outcome.result.trajectory(outcome.te, 0)[0], record["qe"],
-                                   atol=1e-9)
+        np.testing.assert_allclose(outcome.result.trajectory(outcome.te, 0)[0],
+                                   np.asarray(record["qe"]), atol=1e-9)
         report = nearopt.verify(outcome.result.trajectory, robot, q0=record["q0"],
                                 qe=record["qe"], cost=outcome.result.cost, J=outcome.J)
         assert report.passed, str(report)
@@ -262,9 +268,43 @@ def test_bad_motion_files_are_one_line_errors(tmp_path: Path) -> None:
         assert run.returncode == 2 and "Traceback" not in run.stderr
     for options, message in (({"json": "x.json"}, "writes every motion"),
                              ({"colour": 1}, "unknown option 'colour'"),
-                             ({"q0": {"a": 1}}, "option values")):
+                             ({"q0": {"a": 1}}, "option values"),
+                             ({"via": [0.1, 0.2]}, "list of lists")):
         with pytest.raises(nearopt.ConfigurationError, match=message):
             MotionRequest("m", options).argv()
+    with pytest.raises(nearopt.ConfigurationError, match="option values"):  # not repeatable
+        MotionRequest("m", {"q0": [[0, 0], [0.3, 0.3]]}).argv()
+    with pytest.raises(nearopt.ConfigurationError, match="--q0 is given twice"):
+        nearopt.cli.parse_plan(["plan", "--robot", "two_link", "--q0", "0", "0", "--q0", "0.3",
+                                "0.3", "--qe", "1", "1"])
     (tmp_path / "file").write_text("")
     with pytest.raises(nearopt.ConfigurationError, match="not a folder"):
         run_batch([MotionRequest("m", {})], tmp_path / "file")
+
+
+def test_a_changed_input_file_or_rate_is_planned_again(tmp_path: Path) -> None:
+    """Resume counts a motion as done only for the same options, the same contents of the files
+    it names and the same rate; a failure and a planned motion whose ids look alike keep their
+    own files."""
+    task = tmp_path / "t.toml"
+    task.write_text('[[target]]\nq = [0.2, -0.3]\n')
+    records = [{"id": "t1", "robot": "two_link", "q0": [0, 0], "task": "t.toml",
+                "max_iterations": 1, "grid": 60},
+               {"id": "m", "robot": "two_link", "q0": [0, 0], "qe": [0.5, 0.5, 9]},
+               {"id": "m.failed", "robot": "two_link", "q0": [0, 0], "qe": [0.5, 0.5],
+                "max_iterations": 1, "grid": 60}]
+    requests = read_requests(write_motions(tmp_path, records))
+    out = tmp_path / "out"
+    with LocalPool(1) as pool:
+        first = run_batch(requests, out, pool)
+        assert first.failed == 1 and (out / "m.failed.json").exists()
+        assert (out / "failed" / "m.json").exists()
+        assert run_batch(requests, out, pool).skipped == 3
+        task.write_text('[[target]]\nq = [-0.8, -0.9]\n')
+        again = run_batch(requests, out, pool)
+        assert again.skipped == 2
+        np.testing.assert_allclose(json.loads((out / "t1.json").read_text())["q"][-1],
+                                   [-0.8, -0.9], atol=1e-9)
+        assert run_batch(requests, out, pool, rate=500.0).skipped == 0
+    doc = json.loads((out / "t1.json").read_text())
+    assert doc["t"][1] == pytest.approx(1 / 500)

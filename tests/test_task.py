@@ -212,10 +212,14 @@ def test_the_pick_and_place_example_runs_and_its_files_hold_the_task(tmp_path: P
                                atol=1e-6)
     assert [x["stop"] for x in doc["targets"]] == [False, True, False, True]
     assert len(doc["segments"]) == 2
-    speed = np.abs(np.array(doc["qd"])).max(axis=1)
-    for target in doc["targets"][:3]:  # the samples beside each target: moving unless it stops
+    qd, qdd = np.abs(np.array(doc["qd"])), np.abs(np.array(doc["qdd"]))
+    for target in doc["targets"][:3]:  # the sample beside each target: moving unless it stops
         k = int(np.argmin(np.abs(t - target["t"])))
-        assert (speed[k] < 0.1) if target["stop"] else (speed[k] > 0.5), target["name"]
+        if target["stop"]:  # at rest at t_stop: |θ̇(t_k)| ≤ max |θ̈| · |t_k − t_stop|
+            reach = qdd[max(k - 2, 0):k + 3].max(axis=0) * abs(t[k] - target["t"])
+            assert np.all(qd[k] <= reach * 1.01 + 1e-9), target["name"]
+        else:
+            assert qd[k].max() > 0.5, target["name"]
 
 
 def test_a_first_path_through_a_via_point_at_a_limit_stays_within_the_limits() -> None:
@@ -236,3 +240,32 @@ def test_a_first_path_through_a_via_point_at_a_limit_stays_within_the_limits() -
         report = nearopt.verify(result.trajectory, robot, q0=q0, qe=qe,
                                 waypoints=result.waypoints, simulate=False)
         assert report.passed, str(report)
+
+
+def test_every_target_is_checked_before_any_planning(tmp_path: Path) -> None:
+    """A bad later target is reported before the first segment is planned, naming the file, the
+    target and the field; a stop where the arm already is, likewise."""
+    robot = load("panda")
+    start = "start = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]\n"
+    pick = '[[target]]\nname = "pick"\npose = [0.5, -0.3, 0.12, 1.0, 0.0, 0.0, 0.0]\n'
+    cases = {
+        pick + '[[target]]\nname = "short"\nq = [0, 0, 0, 0, 0, 0]\n': ("short", "q"),
+        pick + '[[target]]\nname = "far"\nq = [0, 0, 0, 0.5, 0, 1, 0]\n': ("far", "q"),
+        pick + '[[target]]\nname = "again"\npose = [0.5, -0.3, 0.12, 1.0, 0.0, 0.0, 0.0]\n':
+            ("again", "pose"),
+        '[[target]]\nname = "home"\nq = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]\n':
+            ("home", "q"),
+        '[[target]]\nname = "tool"\nframe = "gripper"\npose = [0.5, 0, 0.3]\n': ("tool", "frame"),
+    }
+    for text, (target, field) in cases.items():
+        path = tmp_path / "task.toml"
+        path.write_text(start + text)
+        task = Task.from_file(path)
+        with pytest.raises(TaskError) as caught:
+            nearopt.plan_task(robot, None, task, time_limit=1e-9)  # would stop at once
+        assert (caught.value.target, caught.value.field) == (target, field), str(caught.value)
+        assert str(path) in str(caught.value)
+    with pytest.raises(nearopt.ConfigurationError, match="time_limit"):
+        nearopt.plan_task(robot, None, task, time_limit="5")
+    with pytest.raises(nearopt.ConfigurationError, match="has no goal"):
+        nearopt.plan_task(robot, np.zeros(7), [Target(None)])

@@ -215,7 +215,7 @@ class Scene:
             raise SceneError(f"a scene file is a path, got {path!r}")
         path = Path(path).expanduser().resolve()
         try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
+            data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
         except OSError as exc:
             raise SceneError(f"cannot read the scene file {path}: {exc.strerror or exc}") from None
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:

@@ -50,7 +50,7 @@ from .records import Iteration, Method, PaperOptions, PlanResult, SCPOptions, St
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Target", "Task", "TaskResult", "plan_task"]
+__all__ = ["Target", "Task", "TaskResult", "plan_task", "check_targets"]
 
 
 @dataclass(frozen=True)
@@ -106,7 +106,7 @@ class Task:
             raise TaskError(f"a task file is a path, got {path!r}")
         path = Path(path).expanduser().resolve()
         try:
-            data = tomllib.loads(path.read_text(encoding="utf-8"))
+            data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
         except OSError as exc:
             raise TaskError(f"cannot read the task file {path}: {exc.strerror or exc}") from None
         except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
@@ -361,11 +361,21 @@ self_collision
             f"robot must be a nearopt.Robot, got {type(robot).__name__} {robot!r:.60}"
         )
     records = _targets(targets.targets if isinstance(targets, Task) else targets)
+    if q0 is None and isinstance(targets, Task) and targets.start is not None:
+        q0 = targets.start
+    if q0 is None:
+        raise ConfigurationError("give the start configuration q0 (the task has no start)")
     cost = TimeCost() if cost is None else cost
-    if not (time_limit > 0):
+    if isinstance(time_limit, bool) or not isinstance(time_limit, int | float) or not (
+        time_limit > 0
+    ):
         raise ConfigurationError(
-            f"time_limit must be a positive number of seconds, got {time_limit}"
+            f"time_limit must be a positive number of seconds, got {time_limit!r}"
         )
+    q0 = robot.check_configuration(q0, "q0")
+    check_targets(robot, records, q0, position_limits=position_limits,
+                  where=None if not isinstance(targets, Task) or targets.source is None
+                  else str(targets.source))
     collisions = _collision_model(robot, scene, margin, self_collision)
     groups: list[list[Target]] = [[]]
     for target in records:
@@ -374,7 +384,7 @@ self_collision
             groups.append([])
     groups = [g for g in groups if g]
     segments: list[PlanResult] = []
-    start = robot.check_configuration(q0, "q0")
+    start = q0
     interrupted = False
     for k, group in enumerate(groups):
         left = time_limit - (time.perf_counter() - t_start)
@@ -423,6 +433,56 @@ self_collision
     )
 
 
+def check_targets(
+    robot: Robot, targets: Sequence[Target], q0: NDArray[np.float64], *,
+    position_limits: bool = True, where: str | None = None,
+) -> None:
+    """Check a task's targets against the robot before any planning: joint vectors of the right
+    length, finite and within the position limits, frames the robot has, and no stop where the
+    arm already is (the start, or the previous stop).
+
+    Raises
+    ------
+    TaskError
+        Naming the task file (``where``), the target and the field.
+    """
+    prefix = f"{where}: " if where else ""
+    previous: object = q0
+    previous_name = "the start"
+    lim = robot.limits
+    for target in targets:
+        name = target.name
+        if isinstance(target.goal, ToolPose):
+            try:
+                robot.frame_id(target.goal.frame)
+            except NearoptError as exc:
+                raise TaskError(f"{prefix}target {name!r}: {exc}", target=name,
+                                field="frame") from None
+            same = isinstance(previous, ToolPose) and previous == target.goal
+        else:
+            try:
+                q = robot.check_configuration(target.goal, "q")
+            except ConfigurationError as exc:
+                raise TaskError(f"{prefix}target {name!r}: {exc}", target=name,
+                                field="q") from None
+            if position_limits:
+                outside = np.flatnonzero((q < lim.position_lower) | (q > lim.position_upper))
+                if outside.size:
+                    i = int(outside[0])
+                    raise TaskError(
+                        f"{prefix}target {name!r}: q[{i}] = {q[i]:.6g} is outside the position "
+                        f"limits [{lim.position_lower[i]:.6g}, {lim.position_upper[i]:.6g}] of "
+                        f"joint {robot.joint_names[i]!r}", target=name, field="q")
+            same = not isinstance(previous, ToolPose) and np.array_equal(previous, q)
+            target = Target(q, target.stop, name)
+        if same:
+            raise TaskError(
+                f"{prefix}target {name!r} is where the arm already is ({previous_name}): a "
+                "target must differ from the one before it", target=name,
+                field="pose" if isinstance(target.goal, ToolPose) else "q")
+        previous, previous_name = target.goal, f"target {name!r}"
+
+
 _ORDER = (StopReason.INTERRUPTED, StopReason.SOLVER, StopReason.TIME_LIMIT,
           StopReason.ITERATION_LIMIT, StopReason.NO_PROGRESS, StopReason.CONVERGED)
 
@@ -456,6 +516,10 @@ def _targets(targets: Sequence[Target | ArrayLike | ToolPose]) -> tuple[Target, 
                     "task)"
                 )
             target = Target(target)
+        if target.goal is None:
+            raise ConfigurationError(
+                f"target {k} has no goal: give a joint vector or a ToolPose"
+            )
         if not isinstance(target.stop, bool | np.bool_):
             raise ConfigurationError(
                 f"target {k}: stop must be true or false, got {target.stop!r}"
