@@ -548,6 +548,8 @@ def _batch_command(args: argparse.Namespace) -> int:
     if args.workers is not None and args.workers < 1:
         raise ConfigurationError(f"--workers must be ≥ 1, got {args.workers}")
     requests = read_requests(args.tasks)
+    # Ctrl-C stops the batch (as it ends `plan`), even where SIGINT was inherited ignored
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     t0 = time.perf_counter()
     summary = run_batch(
         requests, args.out, args.scheduler, workers=args.workers, rate=args.rate,

@@ -134,7 +134,7 @@ def test_bad_targets_are_configuration_errors() -> None:
                     [Target(UR5_GOAL, name="")]):
         with pytest.raises(nearopt.ConfigurationError):
             nearopt.plan_task(robot, UR5_START, targets)
-    with pytest.raises(nearopt.ConfigurationError, match=r"segment 2 \(to 'target 2'\)"):
+    with pytest.raises(TaskError, match=r"target 'target 2': q must have 6 values"):
         nearopt.plan_task(robot, UR5_START, [UR5_GOAL, np.zeros(5)], max_iterations=0)
 
 
