@@ -42,7 +42,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from .errors import ConfigurationError, NearoptError, SamplingWarning
-from .outputs import resolve_output, write_atomically, write_outputs
+from .outputs import make_folder, resolve_output, write_atomically, write_outputs
 
 if TYPE_CHECKING:
     from .planning import PlanResult, TaskResult
@@ -647,13 +647,7 @@ def run_batch(
     """
     t0 = time.perf_counter()
     _check_rate(rate)
-    folder = Path(out).expanduser()
-    if folder.exists() and not folder.is_dir():
-        raise ConfigurationError(f"--out {out}: it is a file, not a folder")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigurationError(f"cannot make the folder {out}: {exc.strerror or exc}") from None
+    folder = make_folder(out, "the motions")
     outcomes: dict[str, MotionOutcome] = {}
     for request in requests:
         done = _done(folder, request, retry_failed, rate)

@@ -34,7 +34,7 @@ if TYPE_CHECKING:
     from collections.abc import Iterator
 
 __all__ = ["OutputKind", "Output", "resolve_output", "check_outputs", "write_outputs",
-           "write_atomically"]
+           "make_folder", "write_atomically"]
 
 
 class OutputKind(Enum):
@@ -218,3 +218,23 @@ def write_atomically(target: str | Path, content: str | bytes) -> Path:
     output = resolve_output(target)
     write_outputs({output: content})
     return output.path if output.path is not None else Path("-")
+
+
+def make_folder(folder: str | Path, what: str) -> Path:
+    """An output folder, made with its parents if missing.
+
+    Raises
+    ------
+    ConfigurationError
+        If it is a file or cannot be made (``what`` names it in the message, e.g. "figures").
+    """
+    path = Path(folder).expanduser()
+    if path.exists() and not path.is_dir():
+        raise ConfigurationError(f"cannot write {what} into {folder}: it is not a folder")
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise ConfigurationError(
+            f"cannot make the folder {folder}: {exc.strerror or exc}"
+        ) from None
+    return path

@@ -27,7 +27,6 @@ A mesh is taken as its convex hull (conservative: split a concave object into se
 from __future__ import annotations
 
 import math
-import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -35,6 +34,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import SceneError
+from ..inputs import read_toml
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -211,15 +211,7 @@ class Scene:
             A missing or malformed file, an unknown field, a bad value; the message names the
             file, the obstacle and the field.
         """
-        if not isinstance(path, str | Path) or not str(path):
-            raise SceneError(f"a scene file is a path, got {path!r}")
-        path = Path(path).expanduser().resolve()
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-        except OSError as exc:
-            raise SceneError(f"cannot read the scene file {path}: {exc.strerror or exc}") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise SceneError(f"the scene file {path} is not valid TOML: {exc}") from None
+        path, data = read_toml(path, SceneError, "scene")
         unknown = sorted(set(data) - {"margin", "obstacle"})
         if unknown:
             raise SceneError(f"{path}: unknown field {unknown[0]!r} (the fields are 'margin' and "

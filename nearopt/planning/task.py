@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import math
 import time
-import tomllib
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -40,6 +39,7 @@ import numpy as np
 from ..collision import Clearance, CollisionModel, Scene
 from ..cost import Cost, TimeCost
 from ..errors import ConfigurationError, NearoptError, TaskError
+from ..inputs import read_toml
 from ..kinematics import ToolPose
 from ..robot import Robot
 from ..trajectory import ChainedTrajectory
@@ -102,15 +102,7 @@ class Task:
             A missing or malformed file, an unknown field, a bad value; the message names the
             file, the target and the field.
         """
-        if not isinstance(path, str | Path) or not str(path):
-            raise TaskError(f"a task file is a path, got {path!r}")
-        path = Path(path).expanduser().resolve()
-        try:
-            data = tomllib.loads(path.read_text(encoding="utf-8-sig"))
-        except OSError as exc:
-            raise TaskError(f"cannot read the task file {path}: {exc.strerror or exc}") from None
-        except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
-            raise TaskError(f"the task file {path} is not valid TOML: {exc}") from None
+        path, data = read_toml(path, TaskError, "task")
         fields = {"start", "units", "frame", "target"}
         unknown = sorted(set(data) - fields)
         if unknown:

@@ -19,8 +19,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import ConfigurationError
-from ..outputs import write_atomically
+from ..outputs import make_folder, write_atomically
 from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:
@@ -387,15 +386,7 @@ def save_figures(
     ConfigurationError
         If ``folder`` is a file or cannot be made.
     """
-    folder = Path(folder).expanduser()
-    if folder.exists() and not folder.is_dir():
-        raise ConfigurationError(f"cannot write figures into {folder}: it is not a folder")
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise ConfigurationError(
-            f"cannot make the folder {folder}: {exc.strerror or exc}"
-        ) from None
+    folder = make_folder(folder, "figures")
     return [
         write_atomically(folder / name, png)
         for name, png in render_figures(result, reference).items()
