@@ -287,7 +287,7 @@ def plan_request(request: MotionRequest, rate: float = 1000.0,
             warnings.simplefilter("ignore", SamplingWarning)
             text = json_text(result, args.rate, extra={
                 "id": request.id,
-                "request": json.loads(request.fingerprint()),
+                "request": json.loads(request.fingerprint(rate)),
                 "batch": {"status": str(result.status), "iterations": iterations,
                           "wall_time": wall, "warnings": notes},
             })

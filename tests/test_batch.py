@@ -306,5 +306,6 @@ def test_a_changed_input_file_or_rate_is_planned_again(tmp_path: Path) -> None:
         np.testing.assert_allclose(json.loads((out / "t1.json").read_text())["q"][-1],
                                    [-0.8, -0.9], atol=1e-9)
         assert run_batch(requests, out, pool, rate=500.0).skipped == 0
+        assert run_batch(requests, out, pool, rate=500.0).skipped == 3  # now done at 500 Hz
     doc = json.loads((out / "t1.json").read_text())
     assert doc["t"][1] == pytest.approx(1 / 500)
