@@ -36,7 +36,7 @@ import threading
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -690,8 +690,8 @@ def run_batch(
 
 
 def _light(outcome: MotionOutcome) -> MotionOutcome:
-    return MotionOutcome(outcome.id, outcome.status, outcome.stop, outcome.J, outcome.te,
-                         outcome.iterations, outcome.wall_time, outcome.error, outcome.warnings)
+    """The outcome without its document and plan (kept for the summary)."""
+    return replace(outcome, document="", result=None)
 
 
 def _file(folder: Path, motion_id: str, planned: bool) -> Path:

@@ -322,20 +322,23 @@ def _robot(args: argparse.Namespace, loader: RobotLoader | None = None) -> Robot
     return robot.with_limits(**overrides) if overrides else robot
 
 
-def plan_options() -> tuple[str, ...]:
-    """The long options of ``nearopt plan`` without dashes, ``-`` as ``_`` (a batch's keys)."""
+def _plan_actions() -> list[argparse.Action]:
+    """The arguments of the ``plan`` subcommand."""
     parser = _parser()
     sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
-    names = (o for a in sub.choices["plan"]._actions for o in a.option_strings)  # noqa: SLF001
+    return sub.choices["plan"]._actions  # noqa: SLF001
+
+
+def plan_options() -> tuple[str, ...]:
+    """The long options of ``nearopt plan`` without dashes, ``-`` as ``_`` (a batch's keys)."""
+    names = (o for a in _plan_actions() for o in a.option_strings)
     return tuple(sorted({o[2:].replace("-", "_") for o in names if o.startswith("--")} - {"help"}))
 
 
 def repeatable_options() -> tuple[str, ...]:
     """The options of ``nearopt plan`` given once per value (``--via``): a batch's list of
     lists."""
-    parser = _parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
-    return tuple(a.dest for a in sub.choices["plan"]._actions  # noqa: SLF001
+    return tuple(a.dest for a in _plan_actions()
                  if isinstance(a, argparse._AppendAction))  # noqa: SLF001
 
 
@@ -477,10 +480,9 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
               f"te = {result.duration:.4f} s, {len(result.segments)} "
               f"segment{'s' if len(result.segments) > 1 else ''}, "
               f"{result.wall_time:.2f} s", file=out)
-        names = iter(t.name for t in result.targets)
-        for k, (t0, seg) in enumerate(zip(result.trajectory.starts, result.segments,
-                                          strict=True)):
-            to = ", ".join(next(names) for _ in range(len(seg.via) + 1))
+        for k, (t0, seg, reached) in enumerate(zip(result.trajectory.starts, result.segments,
+                                                   result.segment_targets, strict=True)):
+            to = ", ".join(t.name for t in reached)
             print(f"  segment {k + 1} (to {to}): t = {t0:.4f}-{t0 + seg.duration:.4f} s, "
                   f"J = {seg.J:.6f}, {len(seg.history) - 1} iterations, {seg.status} "
                   f"({seg.message})", file=out)

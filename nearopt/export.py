@@ -93,12 +93,12 @@ def json_text(result: PlanResult | TaskResult, rate: float = 1000.0,
         for target, t, q in zip(result.targets, result.target_times,
                                 result.target_configurations, strict=True)
     ]
-    names = iter(t.name for t in result.targets)
     document["segments"] = [
         {"t_start": float(t0), "t_end": float(t0 + seg.duration), "J": seg.J,
-         "status": str(seg.status), "targets": [next(names) for _ in range(len(seg.via) + 1)],
+         "status": str(seg.status), "targets": [t.name for t in reached],
          "history": [{"J": it.J, "alpha": it.alpha} for it in seg.history]}
-        for t0, seg in zip(result.trajectory.starts, segments, strict=True)
+        for t0, seg, reached in zip(result.trajectory.starts, segments, result.segment_targets,
+                                    strict=True)
     ]
     return json.dumps(document)
 

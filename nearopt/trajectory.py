@@ -281,6 +281,7 @@ class ChainedTrajectory(Motion):
                     f"(a jump of {np.max(np.abs(qa - qb)):.3g} rad)"
                 )
         self.parts = parts
+        self._dof = int(parts[0](0.0, 0).shape[1])
         durations = np.array([p.duration for p in parts])
         self.starts = np.concatenate([[0.0], np.cumsum(durations)[:-1]])
         self.t = np.unique(np.concatenate([p.t + t0 for p, t0 in zip(parts, self.starts,
@@ -292,7 +293,7 @@ class ChainedTrajectory(Motion):
     @property
     def dof(self) -> int:
         """Number of joints n."""
-        return int(self.parts[0](0.0, 0).shape[1])
+        return self._dof
 
     def part_at(self, t: ArrayLike) -> NDArray[np.intp]:
         """The index of the part each time lies in (a boundary: the part that starts there),

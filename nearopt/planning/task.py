@@ -249,6 +249,16 @@ class TaskResult:
         return float(sum(s.initial.J for s in self.segments))
 
     @property
+    def segment_targets(self) -> tuple[tuple[Target, ...], ...]:
+        """The targets each segment reaches, in order (its via-points, then its stop)."""
+        out, k = [], 0
+        for segment in self.segments:
+            size = len(segment.via) + 1
+            out.append(self.targets[k:k + size])
+            k += size
+        return tuple(out)
+
+    @property
     def target_configurations(self) -> tuple[NDArray[np.float64], ...]:
         """Where the arm is at each target [rad or m] (a tool pose: the configuration the plan
         reached it with), each (n,)."""
@@ -283,11 +293,6 @@ class TaskResult:
         """The last target, when it is a tool pose."""
         last = self.targets[-1].goal
         return last if isinstance(last, ToolPose) else None
-
-    @property
-    def poses(self) -> tuple[ToolPose, ...]:
-        """The tool-pose targets, in order."""
-        return tuple(t.goal for t in self.targets if isinstance(t.goal, ToolPose))
 
 
 def plan_task(
@@ -387,24 +392,18 @@ self_collision
             if callback is not None:
                 callback(k, entry)
 
+        same = dict(method=method, options=options, grid=grid, time_limit=budget,
+                    velocity_limits=velocity_limits, position_limits=position_limits,
+                    scene=collisions, optimise_goal=optimise_goal and k == len(groups) - 1,
+                    via=[t.goal for t in group[:-1]])
         try:
-            segment = plan(
-                robot, start, group[-1].goal, cost, method=method, options=options, grid=grid,
-                max_iterations=0 if interrupted else max_iterations, time_limit=budget,
-                velocity_limits=velocity_limits, position_limits=position_limits,
-                callback=forward, scene=collisions,
-                optimise_goal=optimise_goal and k == len(groups) - 1,
-                via=[t.goal for t in group[:-1]],
-            )
+            segment = plan(robot, start, group[-1].goal, cost, callback=forward,
+                           max_iterations=0 if interrupted else max_iterations,
+                           **same)  # type: ignore[arg-type]
         except KeyboardInterrupt:  # before the segment had a plan: time its first path only
             interrupted = True
-            segment = plan(
-                robot, start, group[-1].goal, cost, method=method, options=options, grid=grid,
-                max_iterations=0, time_limit=budget, velocity_limits=velocity_limits,
-                position_limits=position_limits, scene=collisions,
-                optimise_goal=optimise_goal and k == len(groups) - 1,
-                via=[t.goal for t in group[:-1]],
-            )
+            segment = plan(robot, start, group[-1].goal, cost, max_iterations=0,
+                           **same)  # type: ignore[arg-type]
         except NearoptError as exc:  # the same error, saying which segment
             exc.args = (f"segment {k + 1} (to {names}): {exc}", *exc.args[1:])
             raise

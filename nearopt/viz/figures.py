@@ -325,13 +325,9 @@ def plot_history(
         label = f"nearopt ({result.method})"
         ax.plot(j, [it.J for it in result.history], "-o", markersize=3, label=label)
     else:  # a task: one line per rest-to-rest segment
-        names = iter(t.name for t in result.targets)
-        j = []
-        for k, seg in enumerate(segments):
-            to = [next(names) for _ in range(len(seg.via) + 1)]
-            j = max(j, [it.index for it in seg.history], key=len)
+        for k, (seg, reached) in enumerate(zip(segments, result.segment_targets, strict=True)):
             ax.plot([it.index for it in seg.history], [it.J for it in seg.history], "-o",
-                    markersize=3, label=f"segment {k + 1} (to {to[-1]})")
+                    markersize=3, label=f"segment {k + 1} (to {reached[-1].name})")
     if reference:
         ax.plot(list(reference), list(reference.values()), "s", color="C1",
                 label=reference_label)

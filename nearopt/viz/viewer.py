@@ -428,11 +428,7 @@ def export_html(result: PlanResult | TaskResult, path: str | Path, fps: float = 
 def plan_html(result: PlanResult | TaskResult, fps: float = 60.0) -> str:
     """:func:`scene_html` of a plan, with the first path's tip trail and the obstacles."""
     return scene_html(result.robot, result.trajectory, result.initial_trajectory, fps,
-                      _scene_of(result), _targets_of(result))
-
-
-def _targets_of(result: PlanResult | TaskResult) -> tuple[ToolPose, ...]:
-    return target_poses(result)
+                      _scene_of(result), target_poses(result))
 
 
 def _scene_of(result: PlanResult | TaskResult) -> Scene | None:
@@ -525,7 +521,7 @@ def show(
     viewer = LiveViewer()
     try:
         _draw(viewer.visualizer, result.robot, result.trajectory, result.initial_trajectory, fps,
-              _scene_of(result), _targets_of(result))
+              _scene_of(result), target_poses(result))
     except BaseException:
         viewer.close()
         raise
