@@ -18,13 +18,17 @@ in blocks (:class:`RowBlocks`):
 * interior speed: ((1 − w) b_k + w b_{k+1}) θ'_i(σ_p)² ≤ v_i² at points inside segments, where the
   knots' own rows do not imply it.
 
-The SOCP and NLP back ends read these rows (:meth:`Discretisation.solver_rows`, the same rows
+Every row couples at most two neighbouring knots (those of its segment): it is held in *pair form*,
+``coef_left · b_left + coef_right · b_{left+1} + sqrt_coef · √b_sqrt_node + offset``, from which the
+sparse matrix A is derived. The banded interior-point kernel (:mod:`nearopt.timing.interior`)
+reads the pair form; the SOCP and NLP back ends read these rows (:meth:`Discretisation.solver_rows`, the same rows
 with the redundant speed rows of a fixed path left out), and so do the stage-1 sensitivity and
 stage 2 (which differentiate each row with respect to the path).
 """
 
 from __future__ import annotations
 
+from functools import cached_property
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -70,8 +74,11 @@ class Discretisation:
         Knot and segment of every sample, shape (2N,).
     ds
         Δσ_k, shape (N,).
+    left, coef_left, coef_right
+        The pair form of every row: the first knot of the row's segment (the knot itself for a
+        speed row at a knot) and the coefficients of b at it and at the next knot, shape (R,).
     matrix
-        A: coefficients of b at every knot, sparse (R, N+1).
+        A: coefficients of b at every knot, sparse (R, N+1), built from the pair form.
     sqrt_coef, sqrt_node
         d and the knot of √b in every row, shape (R,) (d = 0 but in damped torque rows).
     offset, lower, upper
@@ -101,27 +108,37 @@ class Discretisation:
         parts = [self._samples(p.torque, keep_all=True)]
         parts.append(self._samples(p.acceleration) if p.acceleration is not None else None)
         parts += [self._speed_at_knots(), self._speed_inside()]
-        sizes, stacks = [], []
-        for part in parts:
-            sizes.append(0 if part is None else part[0].shape[0])
-            if part is not None:
-                stacks.append(part)
+        sizes = [0 if part is None else part[0].size for part in parts]
+        stacks = [part for part in parts if part is not None]
         ends = np.cumsum([0, *sizes])
         self.blocks = RowBlocks(
             *(slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:], strict=True))
         )
-        self.matrix = sp.vstack([s[0] for s in stacks]).tocsr()
-        self.sqrt_coef, self.offset, self.lower, self.upper, self.joint, self.location = (
-            np.concatenate([s[k] for s in stacks]) for k in range(1, 7)
+        (self.left, self.coef_left, self.coef_right, self.sqrt_coef, self.offset, self.lower,
+         self.upper, self.joint, self.location) = (
+            np.concatenate([s[k] for s in stacks]) for k in range(9)
         )
         self.sqrt_node = np.zeros(self.offset.size, dtype=int)
         torque_rows = self.blocks.torque
         self.sqrt_node[torque_rows] = self.node[self.location[torque_rows]]
         self.has_damping = bool(np.any(self.sqrt_coef != 0.0))
-        self._free = self.matrix[:, 1:-1].tocsc()
         b_upper = np.full(big_n + 1, np.inf) if p.b_upper is None else p.b_upper
         self.z_upper = np.asarray(b_upper[1:-1], dtype=float)
         self._reduce()
+
+    @cached_property
+    def matrix(self) -> sp.csr_matrix:
+        """A, the coefficients of b at every knot, sparse (R, N+1)."""
+        rows = np.arange(self.left.size)
+        return sp.coo_matrix(
+            (np.concatenate([self.coef_left, self.coef_right]),
+             (np.concatenate([rows, rows]), np.concatenate([self.left, self.left + 1]))),
+            shape=(self.left.size, self.problem.segments + 1),
+        ).tocsr()
+
+    @cached_property
+    def _free(self) -> sp.csc_matrix:
+        return self.matrix[:, 1:-1].tocsc()
 
     def _reduce(self) -> None:
         """For a fixed path the speed rows of different joints at one place are proportional:
@@ -131,14 +148,13 @@ class Discretisation:
         cap = self.z_upper.copy()
         with np.errstate(divide="ignore"):
             if knots.stop > knots.start:
-                coef = self.matrix[knots].tocsr()
-                col = coef.indices - 1  # one entry per row: the knot's b
-                np.minimum.at(cap, col, self.upper[knots] / coef.data)
+                col = self.left[knots] - 1  # one coefficient per row: the knot's own b
+                np.minimum.at(cap, col, self.upper[knots] / self.coef_left[knots])
             self.z_cap = cap
             inside = np.arange(self.blocks.interior_speed.start, self.blocks.interior_speed.stop)
             keep = np.ones(inside.size, dtype=bool)
             if inside.size:
-                scale = np.asarray(abs(self.matrix[inside]).sum(axis=1)).ravel()  # θ'_i² here
+                scale = np.abs(self.coef_left[inside]) + np.abs(self.coef_right[inside])  # θ'_i²
                 bound = self.upper[inside] / scale
                 order = np.lexsort((bound, self.location[inside]))
                 first = np.r_[True, np.diff(self.location[inside][order]) != 0]
@@ -147,7 +163,7 @@ class Discretisation:
                 k = self.problem.interior_speed.segment[self.location[inside]]
                 ends = np.concatenate([[0.0], cap, [0.0]])  # b_0 = b_N = 0
                 keep &= bound < np.maximum(ends[k], ends[k + 1])
-        self._solver_rows = np.concatenate(
+        self.solver_index = np.concatenate(
             [np.arange(self.blocks.speed.start), inside[keep]]
         )
 
@@ -164,21 +180,14 @@ class Discretisation:
         margin = np.zeros((2 * big_n, n)) if quantity.margin is None else quantity.margin
         lower, upper = safe_limits(quantity)
         rows = np.arange(2 * big_n)
-        blocks = []
-        for i in joints:
-            slope = coef.m[node, i] / (2.0 * self.ds[seg])
-            blocks.append(
-                sp.coo_matrix(
-                    (
-                        np.concatenate([-slope, slope, coef.c[node, i]]),
-                        (np.tile(rows, 3), np.concatenate([seg, seg + 1, node])),
-                    ),
-                    shape=(2 * big_n, big_n + 1),
-                )
-            )
         joints = np.array(joints)
+        slope = coef.m[node][:, joints] / (2.0 * self.ds[seg])[:, None]  # (2N, J)
+        at_left = (node == seg)[:, None]
+        curv = coef.c[node][:, joints]
         return (
-            sp.vstack(blocks),
+            np.tile(seg, joints.size),
+            np.where(at_left, curv - slope, -slope).T.ravel(),
+            np.where(at_left, slope, slope + curv).T.ravel(),
             coef.d[node][:, joints].T.ravel(),
             coef.g[node][:, joints].T.ravel(),
             (lower[joints][:, None] + margin[:, joints].T).ravel(),
@@ -188,11 +197,12 @@ class Discretisation:
         )
 
     def _speed_rows(
-        self, cols: list[NDArray[np.int64]], weights: list[NDArray[np.float64]],
+        self, left: NDArray[np.int64], weights: tuple[NDArray[np.float64], NDArray[np.float64]],
         dtheta: NDArray[np.float64], keep: NDArray[np.bool_],
     ) -> tuple | None:
-        """Rows Σ_j w_j b_{col_j} θ'_i² ≤ v_i² at points with slopes ``dtheta`` (P, n), for every
-        joint with a limit (also where θ'_i = 0: the rows are the same for every path)."""
+        """Rows (w_l b_left + w_r b_{left+1}) θ'_i² ≤ v_i² at points with slopes ``dtheta`` (P, n),
+        for every joint with a limit (also where θ'_i = 0: the rows are the same for every
+        path)."""
         p = self.problem
         v = p.velocity
         point, joint = np.nonzero(keep & np.isfinite(v)[None, :])
@@ -200,30 +210,27 @@ class Discretisation:
             return None
         count = point.size
         slope2 = dtheta[point, joint] ** 2
-        data = np.concatenate([w[point] * slope2 for w in weights])
-        row = np.tile(np.arange(count), len(cols))
-        col = np.concatenate([c[point] for c in cols])
-        matrix = sp.coo_matrix((data, (row, col)), shape=(count, p.segments + 1))
         upper = v[joint] ** 2 * (1.0 - 2.0 * SPEED_SAFETY)
         zero = np.zeros(count)
-        return matrix, zero, zero.copy(), np.full(count, -np.inf), upper, joint, point
+        return (left[point], weights[0][point] * slope2, weights[1][point] * slope2, zero,
+                zero.copy(), np.full(count, -np.inf), upper, joint, point)
 
     def _speed_at_knots(self) -> tuple | None:
         p = self.problem
         knots = np.arange(p.segments + 1)
         keep = np.zeros(p.dtheta.shape, dtype=bool)
         keep[1:-1] = True  # b_0 = b_N = 0
-        return self._speed_rows([knots], [np.ones(knots.size)], p.dtheta, keep)
+        ones = np.ones(knots.size)
+        return self._speed_rows(knots, (ones, 0.0 * ones), p.dtheta, keep)
 
     def _speed_inside(self) -> tuple | None:
         p = self.problem
         inside = p.interior_speed
         if inside is None:
             return None
-        k = inside.segment
         keep = np.ones(inside.dtheta.shape, dtype=bool)
-        return self._speed_rows([k, k + 1], [1.0 - inside.weight, inside.weight], inside.dtheta,
-                                keep)
+        return self._speed_rows(inside.segment, (1.0 - inside.weight, inside.weight),
+                                inside.dtheta, keep)
 
     # ---------------------------------------------------------------- evaluating
     def b(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -233,7 +240,8 @@ class Discretisation:
     def values(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """Every row's value A b + d √b + offset, shape (R,)."""
         b = self.b(z)
-        return self.matrix @ b + self.sqrt_coef * np.sqrt(b)[self.sqrt_node] + self.offset
+        return (self.coef_left * b[self.left] + self.coef_right * b[self.left + 1]
+                + self.sqrt_coef * np.sqrt(b)[self.sqrt_node] + self.offset)
 
     def excess(self, z: NDArray[np.float64]) -> float:
         """The largest violation of any row (≤ 0 when z is feasible), in the rows' units."""
@@ -268,7 +276,7 @@ class Discretisation:
         acceleration rows, the tightest speed row at each point inside a segment, and upper
         bounds on z (from the knots' speed rows and ``problem.b_upper``)."""
         rows = self.linear_rows(z_lin)
-        keep = self._solver_rows
+        keep = self.solver_index
         return LinearRows(rows.matrix[keep], rows.lower[keep], rows.upper[keep]), self.z_cap
 
     def jacobian(self, z: NDArray[np.float64]) -> sp.csr_matrix:
