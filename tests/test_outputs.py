@@ -114,7 +114,9 @@ def run_as_nobody(*args: str) -> tuple[int, str]:
     (the interpreter and nearopt are loaded before, so the checkout may live in a folder that
     user cannot read, such as mktemp's); its exit code and stderr."""
     from nearopt.cli import main
+    from nearopt.timing import load_kernel
 
+    load_kernel()  # stage 1's compiled kernel (numba) too: the child may not read its files
     read, write = os.pipe()
     pid = os.fork()
     if pid == 0:  # child

@@ -31,16 +31,18 @@ u is affine in b and u²/(√b_k + √b_{k+1}) is convex, so its global optimum 
 1. Feasibility is decided exactly: some timing exists iff gravity alone is within the limits
    along the path (b → 0 gives u → g), checked at the knots and at the points between them that
    :func:`optimal_timing` checks; otherwise :class:`InfeasiblePathError` says where.
-2. The problem is a second-order cone program (:func:`solve_conic`; f0 = 1 included), solved by
-   Clarabel.
+2. Every row and every segment's share of J couple only the two knots of a segment, so the
+   problem is banded: nearopt's own primal-dual interior-point method
+   (:func:`~nearopt.timing.interior.solve_interior`) solves it with a tridiagonal Newton system,
+   O(N) per iteration, about 20–40 iterations from 10 to 100 000 segments, the damping torque
+   d√b kept exactly (a local optimum with damping: the problem is then not convex). Clarabel's
+   second-order cone program (:func:`solve_conic`, f0 = 1 included) is the independent reference
+   (``solve_timing(…, method=TimingMethod.SOCP)``) and the fallback where the kernel reports a
+   failure (the message says so); there the damping torque is re-linearised to a fixed point.
 3. Any other f0 (:class:`~nearopt.CallableCost`) goes to SciPy's ``trust-constr`` interior-point
    method from 0.7 times the time-optimal profile (strictly inside the limits), with the exact
-   gradient and the (tridiagonal) Hessian from differences of that gradient: a local optimum.
-
-Damping makes u depend on λ = √b. It is handled, not dropped: the SOCP is solved first without
-the damping torque, then again with its tangent at the previous profile until a fixed point
-(where the tangent is exact), and ``trust-constr`` takes the torque limits as nonlinear
-constraints. The problem is then not convex in general (a local optimum).
+   gradient and the (tridiagonal) Hessian from differences of that gradient: a local optimum;
+   it takes the torque limits as nonlinear constraints when the arm is damped.
 
 :func:`optimal_timing` then checks the torques, accelerations and joint speeds between the samples
 (inside the segments and next to the rest ends); where they leave a limit, it either slows the
@@ -52,6 +54,7 @@ from .between import BetweenSamples, tighten, uniform_slow_down
 from .conic import ConicSolution, is_solved, solve_conic
 from .discretisation import Discretisation, LinearRows, RowBlocks
 from .driver import TimingResult, optimal_timing
+from .interior import InteriorSolution, load_kernel, solve_interior
 from .problem import (
     MAX_GRID,
     SPEED_SAFETY,
@@ -88,6 +91,9 @@ __all__ = [
     "Discretisation",
     "LinearRows",
     "RowBlocks",
+    "InteriorSolution",
+    "solve_interior",
+    "load_kernel",
     "ConicSolution",
     "solve_conic",
     "is_solved",

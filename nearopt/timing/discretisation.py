@@ -19,11 +19,11 @@ in blocks (:class:`RowBlocks`):
   knots' own rows do not imply it.
 
 Every row couples at most two neighbouring knots (those of its segment): it is held in *pair form*,
-``coef_left · b_left + coef_right · b_{left+1} + sqrt_coef · √b_sqrt_node + offset``, from which the
-sparse matrix A is derived. The banded interior-point kernel (:mod:`nearopt.timing.interior`)
-reads the pair form; the SOCP and NLP back ends read these rows (:meth:`Discretisation.solver_rows`, the same rows
-with the redundant speed rows of a fixed path left out), and so do the stage-1 sensitivity and
-stage 2 (which differentiate each row with respect to the path).
+``coef_left · b_left + coef_right · b_{left+1} + sqrt_coef · √b_sqrt_node + offset``, from which
+the sparse matrix A is derived. The banded interior-point kernel (:mod:`nearopt.timing.interior`)
+reads the pair form; the SOCP and NLP back ends read these rows (:meth:`Discretisation.solver_rows`,
+the same rows with the redundant speed rows of a fixed path left out), and so do the stage-1
+sensitivity and stage 2 (which differentiate each row with respect to the path).
 """
 
 from __future__ import annotations
@@ -258,6 +258,20 @@ class Discretisation:
     def torque(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """All torque samples, joint-major (row i·2N + r), shape (n·2N,)."""
         return self.values(z)[self.blocks.torque] if self.blocks.torque.stop else np.zeros(0)
+
+    def torque_cost(self, z: NDArray[np.float64], weights: NDArray[np.float64]) -> float:
+        """The discretised J of f0 = 1 + Σ w_i u_i² (the value of :meth:`objective` for a
+        :class:`~nearopt.TorqueCost` with these weights), without its gradient."""
+        p = self.problem
+        b = self.b(z)
+        lam = np.sqrt(b)
+        dt = segment_times(p.sigma, b)
+        rows = self.blocks.torque
+        u = (self.coef_left[rows] * b[self.left[rows]] + self.coef_right[rows]
+             * b[self.left[rows] + 1] + self.sqrt_coef[rows] * lam[self.sqrt_node[rows]]
+             + self.offset[rows]).reshape(p.dof, 2 * p.segments)
+        energy = weights @ u**2  # Σ_i w_i u_i² at every sample
+        return float(np.sum(dt * (1.0 + 0.5 * (energy[: p.segments] + energy[p.segments:]))))
 
     def linear_rows(self, z_lin: NDArray[np.float64] | None) -> LinearRows:
         """The rows as ``lower ≤ M z ≤ upper``, the damping d√b replaced by its tangent at

@@ -1,11 +1,15 @@
-"""The solver back ends of stage 1: Clarabel's SOCP and SciPy's trust-constr.
+"""The solver back ends of stage 1: nearopt's banded interior-point kernel, Clarabel's SOCP and
+SciPy's trust-constr.
 
-:func:`solve_timing` chooses among them by the cost and the damping (see :mod:`nearopt.timing`);
-every back end reads the same rows, those of :class:`~nearopt.timing.Discretisation`.
+:func:`solve_timing` chooses among them by the cost (see :mod:`nearopt.timing`): the built-in costs
+go to the kernel (:mod:`nearopt.timing.interior`), and to Clarabel only if the kernel reports a
+failure (the answer says so); every back end reads the same rows, those of
+:class:`~nearopt.timing.Discretisation`.
 """
 
 from __future__ import annotations
 
+import dataclasses
 import time
 import warnings
 from collections.abc import Callable
@@ -18,9 +22,10 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint, NonlinearConstraint, minimize
 
 from ..cost import Cost, TimeCost, TorqueCost
-from ..errors import SolverError
+from ..errors import ConfigurationError, SolverError
 from .conic import is_solved, solve_conic
 from .discretisation import Discretisation
+from .interior import solve_interior
 from .problem import check_gravity
 
 if TYPE_CHECKING:
@@ -51,6 +56,7 @@ class TimingStatus(StrEnum):
 class TimingMethod(StrEnum):
     """The back end that produced a timing."""
 
+    INTERIOR = "nearopt interior point"
     SOCP = "Clarabel SOCP"
     NLP = "SciPy trust-constr"
 
@@ -91,6 +97,7 @@ def solve_timing(
     max_iterations: int = 1000,
     time_limit: float = np.inf,
     guess: NDArray[np.float64] | None = None,
+    method: TimingMethod | None = None,
 ) -> TimingSolution:
     """Solve stage 1 on a grid (the kernel: arrays in, b out).
 
@@ -108,9 +115,14 @@ def solve_timing(
         Wall-time budget of the whole solve [s]: checked before and during every conic solve
         and at every NLP iteration.
     guess
-        A timing b near the answer, shape (N+1,), where the damping torque is first linearised
-        (e.g. the last one of a path close to this one); without it, the first solve leaves
-        the damping out.
+        A timing b near the answer, shape (N+1,) (e.g. the last one of a path close to this
+        one): the shape of the interior-point
+        kernel's start (and, for Clarabel, where the damping is first linearised; without it,
+        Clarabel's first solve leaves the damping out).
+    method
+        The back end of the built-in costs (and of the convex start of any other cost):
+        ``TimingMethod.INTERIOR`` or ``TimingMethod.SOCP`` (Clarabel, the independent
+        reference); default: the interior-point kernel, and Clarabel where it reports a failure.
 
     Raises
     ------
@@ -123,14 +135,59 @@ def solve_timing(
     deadline = time.perf_counter() + time_limit
     check_gravity(problem)
     disc = Discretisation(problem)
-    z_guess = None if guess is None or not disc.has_damping else np.asarray(guess)[1:-1]
+    if guess is not None:
+        guess = np.asarray(guess, dtype=float)
+        if guess.shape != problem.sigma.shape:
+            guess = None
+    if method not in (None, TimingMethod.INTERIOR, TimingMethod.SOCP):
+        raise ConfigurationError(f"method must be a TimingMethod of a convex solver (INTERIOR or "
+                                 f"SOCP), got {method!r}")
+    convex = _solve_builtin if method != TimingMethod.SOCP else _solve_reference
+    kernel = {} if convex is _solve_reference else {"method": method}
     if isinstance(cost, TorqueCost):
         weights = cost.torque_weights(problem.dof)
-        return _solve_convex(disc, cost, weights, tolerance, time_limit, z_guess)
+        return convex(disc, cost, weights, tolerance, deadline, guess, time_limit, **kernel)
     # any other f0: a local NLP from inside the time-optimal profile
-    fastest = _solve_convex(disc, TimeCost(), np.zeros(problem.dof), tolerance,
-                            deadline - time.perf_counter(), z_guess)
+    fastest = convex(disc, TimeCost(), np.zeros(problem.dof), tolerance, deadline, guess,
+                     time_limit, **kernel)
     return _solve_nlp(disc, cost, fastest.b[1:-1], tolerance, max_iterations, deadline)
+
+
+KERNEL_TOLERANCE = 1e-10  # the kernel's duality gap and residuals, relative to the cost
+
+
+def _solve_builtin(
+    disc: Discretisation,
+    cost: Cost,
+    weights: NDArray[np.float64],
+    tolerance: float,
+    deadline: float,
+    guess: NDArray[np.float64] | None,
+    time_limit: float,
+    method: TimingMethod | None = None,
+) -> TimingSolution:
+    """f0 = 1 + Σ w u²: the interior-point kernel, or Clarabel's SOCP where the kernel fails
+    (unless ``method`` is ``TimingMethod.INTERIOR``)."""
+    sol = solve_interior(disc, weights, tolerance=KERNEL_TOLERANCE, deadline=deadline,
+                         guess=guess)
+    if sol.timed_out:
+        raise out_of_time(disc.problem, time_limit)
+    if sol.converged:
+        z = into_limits(disc, sol.z)
+        return TimingSolution(
+            b=disc.b(z),
+            objective=disc.torque_cost(z, weights),
+            status=TimingStatus.OPTIMAL,
+            solver=TimingMethod.INTERIOR,
+            iterations=sol.iterations,
+            message=sol.message + (" (damping exact)" if disc.has_damping else ""),
+        )
+    if method == TimingMethod.INTERIOR:
+        raise SolverError(f"nearopt's interior-point kernel failed: {sol.message}")
+    fallback = _solve_reference(disc, cost, weights, tolerance, deadline, guess, time_limit)
+    return dataclasses.replace(
+        fallback, message=f"{fallback.message}; nearopt's interior-point kernel failed first "
+        f"({sol.message})")
 
 
 def out_of_time(problem: TimingProblem, time_limit: float) -> SolverError:
@@ -139,6 +196,26 @@ def out_of_time(problem: TimingProblem, time_limit: float) -> SolverError:
         f"stage 1 ran out of its time limit ({time_limit:.3g} s) on a grid of "
         f"{problem.segments} segments", status="MaxTime"
     )
+
+
+def _solve_reference(
+    disc: Discretisation,
+    cost: Cost,
+    weights: NDArray[np.float64],
+    tolerance: float,
+    deadline: float,
+    guess: NDArray[np.float64] | None,
+    time_limit: float,
+) -> TimingSolution:
+    """f0 = 1 + Σ w u²: Clarabel's SOCP (see :func:`_solve_convex`)."""
+    z_guess = None if guess is None or not disc.has_damping else guess[1:-1]
+    try:
+        return _solve_convex(disc, cost, weights, tolerance, deadline - time.perf_counter(),
+                             z_guess)
+    except SolverError as exc:
+        if exc.status == "MaxTime":
+            raise out_of_time(disc.problem, time_limit) from None
+        raise
 
 
 def _solve_convex(
@@ -253,7 +330,7 @@ def _solve_nlp(
             jac=True,
             hess=hess,
             method="trust-constr",
-            bounds=Bounds(lb, ub),
+            bounds=Bounds(lb, ub, keep_feasible=True),  # b < 0 has no √b
             constraints=[constraint],
             callback=watch,
             options={
