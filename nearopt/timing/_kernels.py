@@ -34,6 +34,7 @@ def _jit(**options: object):  # noqa: ANN202 - numba's decorator
 
 
 RUNNING, CONVERGED, SINGULAR, NOT_FINITE = 0, 1, 2, 3
+ROUNDING = 1e-13  # relative error of a sum of a few hundred terms in double precision
 # reassociation and reciprocals allowed; NaN and inf keep their meaning (the limits may be inf)
 FAST = {"nsz", "arcp", "contract", "reassoc"}
 
@@ -59,6 +60,7 @@ def iterate(z, s, y, left, cl, cr, sd, node, const, e_left, e_cl, e_cr, e_d, e_n
     hdiag = np.zeros(big_n + 1)
     hoff = np.zeros(big_n)
     rd = np.zeros(big_n + 1)
+    rd_size = np.zeros(big_n + 1)  # Σ |terms| of rd: the floor of its rounding error
     rhs = np.zeros(big_n + 1)
     gl = np.zeros(m)
     gr = np.zeros(m)
@@ -88,6 +90,7 @@ def iterate(z, s, y, left, cl, cr, sd, node, const, e_left, e_cl, e_cr, e_d, e_n
         for k in range(big_n + 1):
             hdiag[k] = 0.0
             rd[k] = 0.0
+            rd_size[k] = 0.0
             rhs[k] = 0.0
         for k in range(big_n):
             hoff[k] = 0.0
@@ -134,8 +137,12 @@ def iterate(z, s, y, left, cl, cr, sd, node, const, e_left, e_cl, e_cr, e_d, e_n
             tr = dt * hr
             one = 1.0 + q[k]
             f_total += t * one
-            rd[k] += (tl * one + t * ql[k]) * f_scale
-            rd[k + 1] += (tr * one + t * qr[k]) * f_scale
+            grad_l = (tl * one + t * ql[k]) * f_scale
+            grad_r = (tr * one + t * qr[k]) * f_scale
+            rd[k] += grad_l
+            rd[k + 1] += grad_r
+            rd_size[k] += abs(grad_l)
+            rd_size[k + 1] += abs(grad_r)
             hdiag[k] += (d2 * hl * hl + dt * croot[k]) * one * f_scale
             hdiag[k] += (2.0 * tl * ql[k] + t * qll[k]) * f_scale
             hdiag[k + 1] += (d2 * hr * hr + dt * croot[k + 1]) * one * f_scale
@@ -150,8 +157,10 @@ def iterate(z, s, y, left, cl, cr, sd, node, const, e_left, e_cl, e_cr, e_d, e_n
             g_l = cl[j]
             g_r = cr[j]
             c = g_l * b[k] + g_r * b[k + 1] + const[j]
+            size_j = abs(g_l * b[k]) + abs(g_r * b[k + 1]) + abs(const[j]) + s[j]
             if sd[j] != 0.0:
                 c += sd[j] * lam[nd]
+                size_j += abs(sd[j] * lam[nd])
                 if nd == k:
                     g_l += sd[j] * hinv[nd]
                 else:
@@ -161,10 +170,14 @@ def iterate(z, s, y, left, cl, cr, sd, node, const, e_left, e_cl, e_cr, e_d, e_n
             gr[j] = g_r
             r = c + s[j]
             rp[j] = r
-            rp_max = max(rp_max, abs(r))
+            # the residual beyond the rounding error of the row's terms (they nearly cancel
+            # where the segments are short: coefficients ∝ 1/Δσ)
+            rp_max = max(rp_max, abs(r) - ROUNDING * size_j)
             yj = y[j]
             rd[k] += g_l * yj
             rd[k + 1] += g_r * yj
+            rd_size[k] += abs(g_l * yj)
+            rd_size[k + 1] += abs(g_r * yj)
             gap += s[j] * yj
             inv = 1.0 / s[j]
             inv_s[j] = inv
@@ -178,8 +191,7 @@ def iterate(z, s, y, left, cl, cr, sd, node, const, e_left, e_cl, e_cr, e_d, e_n
             rhs[k + 1] += g_r * v
         rd_max = 0.0
         for k in range(1, big_n):
-            if abs(rd[k] * scale[k - 1]) > rd_max:
-                rd_max = abs(rd[k] * scale[k - 1])
+            rd_max = max(rd_max, (abs(rd[k]) - ROUNDING * rd_size[k]) * scale[k - 1])
         mu = gap / m
         rel = f_total * f_scale
         if gap <= tolerance * rel and rd_max <= tolerance * rel and rp_max <= tolerance:
