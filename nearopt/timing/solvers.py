@@ -142,14 +142,12 @@ def solve_timing(
     if method not in (None, TimingMethod.INTERIOR, TimingMethod.SOCP):
         raise ConfigurationError(f"method must be a TimingMethod of a convex solver (INTERIOR or "
                                  f"SOCP), got {method!r}")
-    convex = _solve_builtin if method != TimingMethod.SOCP else _solve_reference
-    kernel = {} if convex is _solve_reference else {"method": method}
     if isinstance(cost, TorqueCost):
         weights = cost.torque_weights(problem.dof)
-        return convex(disc, cost, weights, tolerance, deadline, guess, time_limit, **kernel)
+        return _solve_builtin(disc, cost, weights, tolerance, deadline, guess, time_limit, method)
     # any other f0: a local NLP from inside the time-optimal profile
-    fastest = convex(disc, TimeCost(), np.zeros(problem.dof), tolerance, deadline, guess,
-                     time_limit, **kernel)
+    fastest = _solve_builtin(disc, TimeCost(), np.zeros(problem.dof), tolerance, deadline, guess,
+                             time_limit, method)
     return _solve_nlp(disc, cost, fastest.b[1:-1], tolerance, max_iterations, deadline)
 
 
@@ -164,30 +162,39 @@ def _solve_builtin(
     deadline: float,
     guess: NDArray[np.float64] | None,
     time_limit: float,
-    method: TimingMethod | None = None,
+    method: TimingMethod | None,
 ) -> TimingSolution:
-    """f0 = 1 + Σ w u²: the interior-point kernel, or Clarabel's SOCP where the kernel fails
-    (unless ``method`` is ``TimingMethod.INTERIOR``)."""
-    sol = solve_interior(disc, weights, tolerance=KERNEL_TOLERANCE, deadline=deadline,
-                         guess=guess)
-    if sol.timed_out:
-        raise out_of_time(disc.problem, time_limit)
-    if sol.converged:
-        z = into_limits(disc, sol.z)
-        return TimingSolution(
-            b=disc.b(z),
-            objective=disc.torque_cost(z, weights),
-            status=TimingStatus.OPTIMAL,
-            solver=TimingMethod.INTERIOR,
-            iterations=sol.iterations,
-            message=sol.message + (" (damping exact)" if disc.has_damping else ""),
-        )
-    if method == TimingMethod.INTERIOR:
-        raise SolverError(f"nearopt's interior-point kernel failed: {sol.message}")
-    fallback = _solve_reference(disc, cost, weights, tolerance, deadline, guess, time_limit)
-    return dataclasses.replace(
-        fallback, message=f"{fallback.message}; nearopt's interior-point kernel failed first "
-        f"({sol.message})")
+    """f0 = 1 + Σ w u²: the interior-point kernel, and Clarabel's SOCP where it fails (unless
+    ``method`` is ``TimingMethod.INTERIOR``), or Clarabel's SOCP alone (``TimingMethod.SOCP``,
+    see :func:`_solve_convex`)."""
+    note = ""
+    if method != TimingMethod.SOCP:
+        sol = solve_interior(disc, weights, tolerance=KERNEL_TOLERANCE, deadline=deadline,
+                             guess=guess)
+        if sol.timed_out:
+            raise out_of_time(disc.problem, time_limit)
+        if sol.converged:
+            z = into_limits(disc, sol.z)
+            return TimingSolution(
+                b=disc.b(z),
+                objective=disc.torque_cost(z, weights),
+                status=TimingStatus.OPTIMAL,
+                solver=TimingMethod.INTERIOR,
+                iterations=sol.iterations,
+                message=sol.message + (" (damping exact)" if disc.has_damping else ""),
+            )
+        if method == TimingMethod.INTERIOR:
+            raise SolverError(f"nearopt's interior-point kernel failed: {sol.message}")
+        note = f"; nearopt's interior-point kernel failed first ({sol.message})"
+    z_guess = None if guess is None or not disc.has_damping else guess[1:-1]
+    try:
+        reference = _solve_convex(disc, cost, weights, tolerance, deadline - time.perf_counter(),
+                                  z_guess)
+    except SolverError as exc:
+        if exc.status == "MaxTime":
+            raise out_of_time(disc.problem, time_limit) from None
+        raise
+    return dataclasses.replace(reference, message=reference.message + note)
 
 
 def out_of_time(problem: TimingProblem, time_limit: float) -> SolverError:
@@ -196,26 +203,6 @@ def out_of_time(problem: TimingProblem, time_limit: float) -> SolverError:
         f"stage 1 ran out of its time limit ({time_limit:.3g} s) on a grid of "
         f"{problem.segments} segments", status="MaxTime"
     )
-
-
-def _solve_reference(
-    disc: Discretisation,
-    cost: Cost,
-    weights: NDArray[np.float64],
-    tolerance: float,
-    deadline: float,
-    guess: NDArray[np.float64] | None,
-    time_limit: float,
-) -> TimingSolution:
-    """f0 = 1 + Σ w u²: Clarabel's SOCP (see :func:`_solve_convex`)."""
-    z_guess = None if guess is None or not disc.has_damping else guess[1:-1]
-    try:
-        return _solve_convex(disc, cost, weights, tolerance, deadline - time.perf_counter(),
-                             z_guess)
-    except SolverError as exc:
-        if exc.status == "MaxTime":
-            raise out_of_time(disc.problem, time_limit) from None
-        raise
 
 
 def _solve_convex(
