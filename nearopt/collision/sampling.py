@@ -13,6 +13,7 @@ forked child seeded afresh, so that a request gives the same paths whatever ran 
 
 from __future__ import annotations
 
+import gc
 import os
 import pickle
 import signal
@@ -61,6 +62,9 @@ def collision_free_path(
     read, write = os.pipe()
     pid = os.fork()
     if pid == 0:  # the child: search, send the control points (or the error) back, exit
+        # the parent's objects stay out of the child's garbage collections (a long-running
+        # process would otherwise have the child traverse its whole inherited heap)
+        gc.freeze()
         os.close(read)
         try:
             found = search_paths(collisions, q0, qe, **arguments)  # type: ignore[arg-type]
@@ -92,6 +96,9 @@ def collision_free_path(
             for c in value]  # type: ignore[union-attr]
 
 
+SEARCH_CHECKS = 20_000  # validity and motion checks one OMPL search may take (about 1-2 s)
+
+
 def search_paths(
     collisions: CollisionModel,
     q0: NDArray[np.float64],
@@ -117,7 +124,9 @@ def search_paths(
     breaks
         Interior knots of the B-spline (as :class:`~nearopt.BSplinePath`), for K points.
     time_limit
-        Budget for OMPL's search and simplification [s].
+        Budget for OMPL's searches and simplifications [s], a safety net: each search stops at
+        its first solution or after ``SEARCH_CHECKS`` checks, each simplification after one
+        pass, whatever the time.
     clearance
         The distance OMPL keeps [m] (default: margin + 2 cm).
     attempts
@@ -169,13 +178,17 @@ def search_paths(
         near = min(np.max(np.abs(q - q0)), np.max(np.abs(q - qe))) < end_distance
         return margin if near else clearance
 
+    checks = [0]  # validity and motion checks so far: the searches' deterministic clock
+
     def valid(state: object) -> bool:
+        checks[0] += 1
         q = np.array(state[0:n])  # type: ignore[index]
         d = collisions.distances(q)
         return bool(d.size == 0 or d.min() >= level(q))
 
     class Motion(ob.MotionValidator):  # type: ignore[misc, name-defined]
         def checkMotion(self, s1: object, s2: object) -> bool:  # noqa: N802 - OMPL's name
+            checks[0] += 1
             a, b = np.array(s1[0:n]), np.array(s2[0:n])  # type: ignore[index]
             if np.array_equal(a, b):
                 return valid(s1)
@@ -190,18 +203,24 @@ def search_paths(
     goal[0:n] = [float(x) for x in qe]
     setup.setStartAndGoalStates(start, goal)
     setup.setPlanner(og.RRTConnect(info))
-    t0 = time.perf_counter()
+    # Each search ends at its first solution or after SEARCH_CHECKS checks, and each
+    # simplification after one pass: counted, not timed, so that the same request gives the same
+    # paths however fast this process runs (a long-running one is slower). The wall-clock
+    # time_limit only stops what is left once it has run out.
+    deadline = time.perf_counter() + time_limit
     found: list[BSplinePath] = []
-    for attempt in range(attempts):
-        left = time_limit - (time.perf_counter() - t0)
-        if attempt and left < 0.25 * time_limit:
+    for _ in range(attempts):
+        if time.perf_counter() >= deadline:
             break
         setup.clear()
-        status = setup.solve(max(left / (attempts - attempt), 1e-3))
+        first = checks[0]
+        status = setup.solve(ob.PlannerTerminationCondition(
+            lambda first=first: checks[0] - first > SEARCH_CHECKS
+            or time.perf_counter() >= deadline))
         if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
             continue
         path = setup.getSolutionPath()
-        setup.getPathSimplifier().simplify(path, max(0.2 * left / attempts, 1e-3))
+        setup.getPathSimplifier().simplify(path, ob.PlannerTerminationCondition(lambda: True))
         points = np.array([s[0:n] for s in path.getStates()], dtype=float)
         points[0], points[-1] = q0, qe
         for k in (control_points, 2 * control_points, 4 * control_points, 8 * control_points):
