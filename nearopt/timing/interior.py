@@ -156,10 +156,8 @@ def _without_implied(disc: Discretisation, rows: _Rows, cap: NDArray[np.float64]
     knot = node[order[starts[:-1]]]
     big_n = disc.problem.segments
     bounded = np.isfinite(b_max) & (knot > 0) & (knot < big_n) & (b_max > 0.0)
+    bounded &= b_max < cap_b[knot]  # no need for a bound the knot already has
     knot, b_max = knot[bounded], b_max[bounded]
-    if not np.all(b_max < cap_b[knot]):  # no need for a bound the knot already has
-        sel = b_max < cap_b[knot]
-        knot, b_max = knot[sel], b_max[sel]
     one = np.ones(knot.size)
     extra = (knot, 1.0 / b_max, 0.0 * one, 0.0 * one, knot, -one)
     return _Rows(*(np.concatenate([field[keep], add]) for field, add in zip(rows, extra,
@@ -273,7 +271,7 @@ def solve_interior(
     s = -rows.values(np.concatenate([[0.0], z, [0.0]]), np.sqrt(np.concatenate([[0.0], z, [0.0]])))
     if np.any(s <= 0.0):
         return InteriorSolution(z, False, 0, "the start is not strictly feasible")
-    f_scale = 1.0 / _cost(ds, z, *e_rows)
+    f_scale = 1.0 / disc.torque_cost(z, weights)
     y = (1.0 / m) / s  # centred, with a duality gap of the order of F (scaled to 1)
     args = (
         np.ascontiguousarray(rows.left, dtype=np.int64), rows.coef_left, rows.coef_right,
@@ -329,19 +327,6 @@ def _compiled():  # noqa: ANN202 - numba's dispatcher
     from ._kernels import iterate
 
     return iterate
-
-
-def _cost(ds: NDArray[np.float64], z: NDArray[np.float64], e_left: NDArray[np.int64],
-          e_cl: NDArray[np.float64], e_cr: NDArray[np.float64], e_d: NDArray[np.float64],
-          e_node: NDArray[np.int64], e_const: NDArray[np.float64],
-          e_w: NDArray[np.float64]) -> float:
-    """F(b) = Σ Δt_k (1 + Q_k) of this module's docstring."""
-    b = np.concatenate([[0.0], z, [0.0]])
-    lam = np.sqrt(b)
-    dt = 2.0 * ds / (lam[:-1] + lam[1:])
-    u = e_cl * b[e_left] + e_cr * b[e_left + 1] + e_d * lam[e_node] + e_const
-    q = 0.5 * np.bincount(e_left, e_w * u * u, ds.size)
-    return float(np.sum(dt * (1.0 + q)))
 
 
 def _shape(rows: _Rows, sigma: NDArray[np.float64]) -> NDArray[np.float64]:
