@@ -141,6 +141,7 @@ class Robot:
             raise URDFError(f"robot {name!r}: nq = {model.nq} ≠ nv = {model.nv}")
         self._model = model
         self._data = model.createData()
+        self._pool: pin.ModelPool | None = None  # for batches of RNEA, made on first use
         self.name = name
         self.tip = tip
         self.limits = limits
@@ -152,6 +153,12 @@ class Robot:
         self.srdf = srdf
         self._tip_id = _frame_id(model, tip, name)
         self._has_damping = bool(np.any(self.damping != 0.0))
+
+    def __getstate__(self) -> dict:
+        """What pickling keeps (a Dask worker's copy): all but the RNEA pool, made again there."""
+        state = self.__dict__.copy()
+        state["_pool"] = None
+        return state
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -474,9 +481,26 @@ class Robot:
         """Eq. (1) at N samples: arrays of shape (N, n) in, torques of shape (N, n) out."""
         q, qd, qdd = (np.atleast_2d(np.asarray(x, dtype=float)) for x in (q, qd, qdd))
         self._check_batch(q, qd, qdd)
-        rnea, model, data = pin.rnea, self._model, self._data
-        out = np.array([rnea(model, data, q[k], qd[k], qdd[k]) for k in range(q.shape[0])])
-        return out.reshape(q.shape) + self.damping * qd
+        return self._rnea_columns(q, qd, qdd) + self.damping * qd
+
+    def _rnea_columns(
+        self, q: NDArray[np.float64], qd: NDArray[np.float64], qdd: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
+        """Pinocchio's RNEA (no damping) at N samples in one call, (N, n) in and out.
+
+        ``pin.rneaInParallel`` on one thread over a model pool of this robot: the loop runs in C++
+        (about 2× faster than a Python loop over ``pin.rnea`` on a 7-joint arm), with the same
+        numbers.
+        """
+        count = q.shape[0]
+        if count == 0:
+            return np.zeros((0, self.n))
+        if self._pool is None:
+            self._pool = pin.ModelPool(self._model, 1)
+        tau = np.zeros((self.n, count), order="F")
+        pin.rneaInParallel(1, self._pool, np.asfortranarray(q.T), np.asfortranarray(qd.T),
+                           np.asfortranarray(qdd.T), tau)
+        return tau.T
 
     def forward_dynamics(self, q: ArrayLike, qd: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
         """θ̈ = H⁻¹(u − h − g − Dθ̇), the acceleration part of ẋ = f(x, u) (eq. 20), shape (n,)."""
@@ -538,16 +562,12 @@ class Robot:
             np.atleast_2d(np.asarray(x, dtype=float)) for x in (theta, dtheta, ddtheta)
         )
         self._check_batch(theta, dtheta, ddtheta)
-        model, data = self._model, self._data
-        zero = np.zeros(self.n)
-        count = theta.shape[0]
-        g = np.empty((count, self.n))
-        c = np.empty((count, self.n))
-        m = np.empty((count, self.n))
-        for k in range(count):
-            g[k] = pin.computeGeneralizedGravity(model, data, theta[k])
-            c[k] = pin.rnea(model, data, theta[k], dtheta[k], ddtheta[k])
-            m[k] = pin.rnea(model, data, theta[k], zero, dtheta[k])
+        zero = np.zeros_like(dtheta)
+        g, c, m = np.split(
+            self._rnea_columns(np.vstack([theta, theta, theta]), np.vstack([zero, dtheta, zero]),
+                               np.vstack([zero, ddtheta, dtheta])),
+            3,
+        )
         return PathCoefficients(m - g, c - g, self.damping * dtheta, g)
 
     def path_torque(
