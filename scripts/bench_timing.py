@@ -58,8 +58,8 @@ def arm(name: str, case: str) -> nearopt.Robot:
 
 
 def knots_only(problem: nearopt.timing.TimingProblem) -> nearopt.timing.TimingProblem:
-    """The peers' problem: speeds at the knots only."""
-    return dataclasses.replace(problem, interior_speed=None)
+    """The peers' problem: limits at the knots only."""
+    return dataclasses.replace(problem, interior_speed=None, interior=None)
 
 
 def peer(case: str, robot: nearopt.Robot, path: nearopt.Path, sigma: np.ndarray,

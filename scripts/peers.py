@@ -308,7 +308,7 @@ def _nearopt(robot, path, grid: int, cost):
 
     t0 = time.perf_counter()
     problem = build_timing_problem(robot, path, grid=grid)
-    problem = dataclasses.replace(problem, interior_speed=None)
+    problem = dataclasses.replace(problem, interior_speed=None, interior=None)
     sol = solve_timing(problem, cost)
     wall = time.perf_counter() - t0
     return problem, sol, float(segment_times(problem.sigma, sol.b).sum()), wall

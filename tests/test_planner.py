@@ -27,7 +27,11 @@ def end_points(robot: nearopt.Robot, seed: int) -> tuple[np.ndarray, np.ndarray]
 @pytest.mark.parametrize("name", ["two_link", "ur5", "panda"])
 def test_row_path_jacobian_matches_finite_differences(name: str) -> None:
     """∂(stage 1's rows)/∂(control points) at a fixed timing, against central differences of the
-    rows rebuilt for the perturbed paths (torques with damping, accelerations, speeds)."""
+    rows rebuilt for the perturbed paths (torques with damping, accelerations, speeds): exact
+    for the rows at the samples; the rows between the samples (the bounds of the motion inside
+    the segments) are interpolated between the derivatives at their segment's ends, an O(Δσ²)
+    approximation for stage 2's convex model (every step it proposes is timed again exactly),
+    within 1 % of the largest entry at N = 60 (0.6 % measured)."""
     robot = load(name).with_limits(acceleration=30.0)
     rng = np.random.default_rng(5)
     q0, qe = end_points(robot, seed=5)
@@ -50,7 +54,15 @@ def test_row_path_jacobian_matches_finite_differences(name: str) -> None:
             assert np.array_equal(rebuilt.joint, disc.joint)  # the same rows, in order
             values.append(rebuilt.values(z))
         fd = (values[0] - values[1]) / (2 * h)
-        np.testing.assert_allclose(jac[:, column], fd, atol=1e-7 * np.abs(jac).max())
+        between = np.zeros(fd.size, dtype=bool)
+        for block in (disc.blocks.torque_between, disc.blocks.acceleration_between,
+                      disc.blocks.speed_between):
+            between[block] = True
+        assert between.any()
+        np.testing.assert_allclose(jac[~between, column], fd[~between],
+                                   atol=1e-7 * np.abs(jac).max())
+        np.testing.assert_allclose(jac[between, column], fd[between],
+                                   atol=1e-2 * np.abs(jac).max())
 
 
 @pytest.mark.parametrize("name", ["two_link", "ur5"])

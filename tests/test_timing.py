@@ -399,18 +399,25 @@ def kernel_cases(name: str, count: int, seed: int) -> list[tuple[TimingProblem, 
 def test_kernel_finds_clarabels_optimum(name: str) -> None:
     """The interior-point kernel and Clarabel's SOCP on the same rows reach the same optimum: the
     discretised J and the duration agree to 1e-7 relative (ur5 and panda are damped: the kernel
-    keeps √b exactly, Clarabel re-linearises it to a fixed point). Clarabel itself stops short
-    on some problems with acceleration limits ("InsufficientProgress"): those are not compared."""
+    keeps √b exactly, Clarabel re-linearises it to a fixed point), and the kernel's J is never
+    above Clarabel's. Clarabel itself stops short on some problems with acceleration limits
+    ("InsufficientProgress", or an answer that leaves the rows between the samples, whose
+    coefficients ∝ 1/Δσ nearly cancel, by 1e-7 of a limit and more, so that it has to be slowed
+    down by that much to hold them): those are not compared beyond the kernel's being no worse."""
     compared = 0
     for problem, cost in kernel_cases(name, 10, 1):
         ours = solve_timing(problem, cost)
         assert ours.solver == TimingMethod.INTERIOR, ours.message
+        assert ours.slowed <= 1e-12, ours.slowed  # the kernel's answer holds every row
         try:
             reference = solve_timing(problem, cost, method=TimingMethod.SOCP)
         except nearopt.SolverError:
             continue
-        compared += 1
         assert reference.solver == TimingMethod.SOCP
+        assert ours.objective <= reference.objective * (1.0 + 1e-9)
+        if reference.slowed > 1e-8:
+            continue
+        compared += 1
         np.testing.assert_allclose(ours.objective, reference.objective, rtol=1e-7)
         durations = [segment_times(problem.sigma, sol.b).sum() for sol in (ours, reference)]
         np.testing.assert_allclose(*durations, rtol=1e-7)

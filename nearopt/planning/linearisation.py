@@ -8,7 +8,9 @@ flattened into p with index j·n + i for joint i of interior point j), every row
   ∂u/∂θ = ∂ID/∂θ, ∂u/∂θ' = λ ∂ID/∂θ̇ + a H, ∂u/∂θ'' = b H (Pinocchio's RNEA derivatives, the
   damping D included in ∂ID/∂θ̇);
 * joint acceleration θ̈_i = θ'_i a + θ''_i b: ∂/∂θ'_i = a, ∂/∂θ''_i = b;
-* joint speed b θ'_i² (at knots and inside segments): ∂/∂θ'_i = 2 b θ'_i.
+* joint speed b θ'_i² (at knots and inside segments): ∂/∂θ'_i = 2 b θ'_i;
+* the rows between the samples (the bounds of the motion between them): interpolated linearly
+  between the same quantity's derivatives at the two ends of their segment.
 
 With ∂θ^(o)(σ)/∂c_j = B_j^(o)(σ), :func:`row_path_jacobian` gives ∂(rows)/∂p at a timing b; the
 rows are then linear in b (for a fixed path) and, to first order, in p: the convex model of
@@ -93,6 +95,7 @@ def row_path_jacobian(
     torque = sum(
         np.einsum("rab,rj->arjb", d, basis.knots[o][node]) for o, d in enumerate(d_order)
     )
+    torque = torque.reshape(n, 2 * big_n, k_count * n)
     parts.append(sp.coo_matrix(torque.reshape(n * 2 * big_n, k_count * n)))
 
     def joint_rows(rows: slice, value: NDArray[np.float64], shape: NDArray[np.float64]) -> None:
@@ -119,6 +122,23 @@ def row_path_jacobian(
         k, w = inside.segment[point], inside.weight[point]
         b_at = (1.0 - w) * b[k] + w * b[k + 1]
         joint_rows(rows, 2.0 * b_at * inside.dtheta[point, joint], basis.interior[point])
+    # the rows between the samples: interpolated between the segment's two ends (their own
+    # curvature terms, second differences along the segment, are left out: O(Δσ²) smaller)
+    rows = disc.blocks.torque_between
+    k, w, joint = disc.location[rows], disc.position[rows], disc.joint[rows]
+    parts.append(sp.coo_matrix((1.0 - w)[:, None] * torque[joint, k]
+                               + w[:, None] * torque[joint, big_n + k]))
+    rows = disc.blocks.acceleration_between
+    k, w = disc.location[rows], disc.position[rows]
+    a_k = (np.diff(b) / (2.0 * disc.ds))[k]  # the segment's path acceleration
+    at_ends = [a_k[:, None] * basis.knots[1][knot] + b[knot, None] * basis.knots[2][knot]
+               for knot in (k, k + 1)]
+    joint_rows(rows, np.ones(k.size), (1.0 - w)[:, None] * at_ends[0] + w[:, None] * at_ends[1])
+    rows = disc.blocks.speed_between
+    k, w, joint = disc.location[rows], disc.position[rows], disc.joint[rows]
+    joint_rows(rows, np.ones(k.size),
+               ((1.0 - w) * 2.0 * b[k] * p.dtheta[k, joint])[:, None] * basis.knots[1][k]
+               + (w * 2.0 * b[k + 1] * p.dtheta[k + 1, joint])[:, None] * basis.knots[1][k + 1])
     out = sp.vstack(parts).tocsr()
     out.eliminate_zeros()
     return out

@@ -453,6 +453,9 @@ def _model(
     slack = np.minimum(disc.upper - value, value - disc.lower)
     moved = abs(jac) @ reach
     keep = (slack <= np.where(np.isfinite(disc.lower), 0.5, 0.75) * span) | (slack <= 2.0 * moved)
+    for block in (disc.blocks.torque_between, disc.blocks.acceleration_between,
+                  disc.blocks.speed_between):
+        keep[block] = False
     # a speed row b θ'_i² ≤ v_i² is taken in its bound form b ≤ v_i²/θ'_i², whose tangent in θ'
     # lies below the convex bound: what the model allows, the exact row allows too
     lower, upper = rows.lower.copy(), rows.upper.copy()

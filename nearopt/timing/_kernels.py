@@ -400,3 +400,375 @@ def redundant_rows(order, starts, left, cl, cr, sd, node, const, ds, cap_b):  # 
                     drop[order[lo + p]] = True
                     break
     return drop, b_max
+
+
+@_jit()
+def _clip(xs, ys, count, a, b, c, out_x, out_y):  # pragma: no cover - compiled
+    """The convex polygon (xs, ys)[:count] cut by a x + b y + c ≤ 0 (Sutherland–Hodgman), into
+    out_x, out_y; returns its vertex count."""
+    kept = 0
+    for i in range(count):
+        j = i + 1 if i + 1 < count else 0
+        fp = a * xs[i] + b * ys[i] + c
+        fq = a * xs[j] + b * ys[j] + c
+        if fp <= 0.0:
+            out_x[kept] = xs[i]
+            out_y[kept] = ys[i]
+            kept += 1
+        if (fp < 0.0 < fq) or (fq < 0.0 < fp):
+            t = fp / (fp - fq)
+            out_x[kept] = xs[i] + t * (xs[j] - xs[i])
+            out_y[kept] = ys[i] + t * (ys[j] - ys[i])
+            kept += 1
+    return kept
+
+
+@_jit()
+def needed_inside(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b,
+                  seg_inside, in_cl, in_cr, in_off, in_d, in_w, in_lo, in_up,
+                  slack):  # pragma: no cover - compiled
+    """Which sides of the rows inside segments the rows at the segments' samples leave open.
+
+    Segment k's samples allow (b_k, b_{k+1}) in a convex polygon: the box [0, cap_b[k]] ×
+    [0, cap_b[k+1]] cut by its sample rows lo ≤ cl b_k + cr b_{k+1} + off ≤ up (those in
+    ``seg_rows[k] : seg_rows[k + 1]``, undamped; damped ones are left out, which only enlarges
+    the polygon), each loosened by ``slack`` of its size. A row inside the segment (those in
+    ``seg_inside[k] : seg_inside[k + 1]``), cl b_k + cr b_{k+1} + off + d √b_p with
+    b_p = (1 − w) b_k + w b_{k+1}, is implied on a side where its extreme over the polygon's
+    vertices (the √ term bounded separately) is within the limit by ``slack`` of its size. Where
+    the box is unbounded or the polygon empty, both sides are kept. Returns the masks of the
+    upper and the lower sides needed.
+    """
+    m = in_cl.size
+    need_up = np.ones(m, dtype=np.bool_)
+    need_lo = np.ones(m, dtype=np.bool_)
+    big_n = seg_rows.size - 1
+    size = 4
+    for k in range(big_n):
+        size = max(size, 4 + 2 * (seg_rows[k + 1] - seg_rows[k]))
+    xs = np.empty(size)
+    ys = np.empty(size)
+    tx = np.empty(size)
+    ty = np.empty(size)
+    for k in range(big_n):
+        count = _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack,
+                         xs, ys, tx, ty)
+        if count <= 0:
+            continue
+        bx, by = cap_b[k], cap_b[k + 1]
+        for q in range(seg_inside[k], seg_inside[k + 1]):
+            hi = -np.inf
+            lo = np.inf
+            b_hi = 0.0
+            b_lo = np.inf
+            for v in range(count):
+                value = in_cl[q] * xs[v] + in_cr[q] * ys[v] + in_off[q]
+                hi = max(hi, value)
+                lo = min(lo, value)
+                bp = max((1.0 - in_w[q]) * xs[v] + in_w[q] * ys[v], 0.0)
+                b_hi = max(b_hi, bp)
+                b_lo = min(b_lo, bp)
+            d = in_d[q]
+            if d > 0.0:
+                hi += d * np.sqrt(b_hi)
+                lo += d * np.sqrt(b_lo)
+            elif d < 0.0:
+                hi += d * np.sqrt(b_lo)
+                lo += d * np.sqrt(b_hi)
+            size_q = abs(in_cl[q]) * bx + abs(in_cr[q]) * by + abs(in_off[q]) + abs(d) * np.sqrt(
+                max(bx, by))
+            if hi <= in_up[q] - slack * (size_q + abs(in_up[q])):
+                need_up[q] = False
+            if lo >= in_lo[q] + slack * (size_q + abs(in_lo[q])):
+                need_lo[q] = False
+    return need_up, need_lo
+
+
+@_jit()
+def _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack, xs, ys, tx,
+             ty):  # pragma: no cover - compiled
+    """The polygon of (b_k, b_{k+1}) that segment k's sample rows allow (see
+    :func:`needed_inside`), into xs, ys; its vertex count (−1 where the box is unbounded)."""
+    bx, by = cap_b[k], cap_b[k + 1]
+    if not (np.isfinite(bx) and np.isfinite(by)):
+        return -1
+    xs[0], ys[0], xs[1], ys[1] = 0.0, 0.0, bx, 0.0
+    xs[2], ys[2], xs[3], ys[3] = bx, by, 0.0, by
+    count = 4
+    for r in range(seg_rows[k], seg_rows[k + 1]):
+        size_r = abs(row_cl[r]) * bx + abs(row_cr[r]) * by + abs(row_off[r])
+        for sign in (1.0, -1.0):
+            bound = row_up[r] if sign > 0.0 else row_lo[r]
+            if not np.isfinite(bound):
+                continue
+            loose = slack * (size_r + abs(bound))
+            count = _clip(xs, ys, count, sign * row_cl[r], sign * row_cr[r],
+                          sign * (row_off[r] - bound) - loose, tx, ty)
+            for v in range(count):
+                xs[v] = tx[v]
+                ys[v] = ty[v]
+            if count == 0:
+                return 0
+    return count
+
+
+@_jit()
+def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl, pcr, poff,
+                  lo, up, slack, touch, merge):  # pragma: no cover - compiled
+    """The rows that hold :class:`~nearopt.timing.BetweenSamples`' bound of a quantity between
+    its points, where the other rows of the segment do not imply them.
+
+    The quantity at the P + 2 points of segment k (its knots and the points inside) is, for
+    joint j, q_p = pcl[k, p, j] b_k + pcr[k, p, j] b_{k+1} + poff[k, p, j]; on the interval
+    between points p and p + 1 the bound is max(q_p, q_{p+1}) + (max(|κ_p|, |κ_{p+1}|)
+    + |κ_{p+1} − κ_p|) / 8 (κ the second differences, extrapolated to the knots as in
+    ``between._curvature``), and it lies within [lo_j, up_j] (and so does the one from below)
+    if and only if every sum q_i ± κ_l / 8 ± (κ_{p+1} − κ_p) / 8,
+    i, l ∈ {p, p + 1}, does (the bound of :class:`~nearopt.timing.BetweenSamples`). Each is a
+    row of the two knots. A side of one is left out where it is implied: first where its extreme
+    over the polygon of the samples (see :func:`needed_inside`) is within the limit by
+    ``slack`` of its size; then the polygon is cut by the sides left and those that do not
+    touch what remains, or cut into it by less than ``touch`` of their limit, are left out too (a
+    convex polygon is the intersection of the half-planes that touch it; what the motion may
+    then exceed a bound by, ``touch`` relatively, the check after the solve takes back by a
+    uniform slow-down). Sides of one joint that differ by less than ``merge`` of their size over the
+    box are merged into one that implies both (the optimum moves by at most that, relatively).
+    Returns the one-sided rows: segment, point i, joint, the coefficients of b_k and
+    b_{k+1}, the constant and the limits (±inf on a side implied).
+    """
+    big_n, points, joints = pcl.shape
+    n_pairs = 16 * (points - 1)  # the sums of every interval
+    per_seg = joints * n_pairs
+    size = 4
+    for k in range(big_n):
+        size = max(size, 4 + 2 * (seg_rows[k + 1] - seg_rows[k]) + 2 * per_seg)
+    xs = np.empty(size)
+    ys = np.empty(size)
+    tx = np.empty(size)
+    ty = np.empty(size)
+    cap = max(1024, 4 * big_n * joints)  # grown as needed: most rows are left out
+    o_seg = np.empty(cap, dtype=np.int64)
+    o_pt = np.empty(cap, dtype=np.int64)
+    o_joint = np.empty(cap, dtype=np.int64)
+    o_cl = np.empty(cap)
+    o_cr = np.empty(cap)
+    o_off = np.empty(cap)
+    o_lo = np.empty(cap)
+    o_up = np.empty(cap)
+    kcl = np.empty(points)
+    kcr = np.empty(points)
+    koff = np.empty(points)
+    c_pt = np.empty(per_seg, dtype=np.int64)
+    c_joint = np.empty(per_seg, dtype=np.int64)
+    c_cl = np.empty(per_seg)
+    c_cr = np.empty(per_seg)
+    c_off = np.empty(per_seg)
+    c_up = np.empty(per_seg, dtype=np.bool_)
+    c_lo = np.empty(per_seg, dtype=np.bool_)
+    out = 0
+    for k in range(big_n):
+        count = _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack,
+                         xs, ys, tx, ty)
+        bx, by = cap_b[k], cap_b[k + 1]
+        found = 0
+        for j in range(joints):
+            if not (np.isfinite(lo[j]) or np.isfinite(up[j])):
+                continue
+            for p in range(1, points - 1):
+                kcl[p] = pcl[k, p - 1, j] - 2.0 * pcl[k, p, j] + pcl[k, p + 1, j]
+                kcr[p] = pcr[k, p - 1, j] - 2.0 * pcr[k, p, j] + pcr[k, p + 1, j]
+                koff[p] = poff[k, p - 1, j] - 2.0 * poff[k, p, j] + poff[k, p + 1, j]
+            # at the knots extrapolated from the two next points (see between._curvature)
+            last = points - 1
+            if points >= 4:
+                kcl[0], kcr[0] = 2.0 * kcl[1] - kcl[2], 2.0 * kcr[1] - kcr[2]
+                koff[0] = 2.0 * koff[1] - koff[2]
+                kcl[last] = 2.0 * kcl[last - 1] - kcl[last - 2]
+                kcr[last] = 2.0 * kcr[last - 1] - kcr[last - 2]
+                koff[last] = 2.0 * koff[last - 1] - koff[last - 2]
+            else:
+                kcl[0], kcr[0], koff[0] = kcl[1], kcr[1], koff[1]
+                kcl[last], kcr[last], koff[last] = kcl[last - 1], kcr[last - 1], koff[last - 1]
+            if count > 0:  # no sum can bind if the values and curvatures together cannot
+                v_hi, v_lo, k_abs, dk_abs, v_size, k_size = -np.inf, np.inf, 0.0, 0.0, 0.0, 0.0
+                for p in range(points):
+                    hi, low = _extremes(pcl[k, p, j], pcr[k, p, j], poff[k, p, j], xs, ys, count)
+                    v_hi, v_lo = max(v_hi, hi), min(v_lo, low)
+                    hi, low = _extremes(kcl[p], kcr[p], koff[p], xs, ys, count)
+                    k_abs = max(k_abs, abs(hi), abs(low))
+                    if p + 1 < points:
+                        hi, low = _extremes(kcl[p + 1] - kcl[p], kcr[p + 1] - kcr[p],
+                                            koff[p + 1] - koff[p], xs, ys, count)
+                        dk_abs = max(dk_abs, abs(hi), abs(low))
+                    v_size = max(v_size, abs(pcl[k, p, j]) * bx + abs(pcr[k, p, j]) * by
+                                 + abs(poff[k, p, j]))
+                    k_size = max(k_size, abs(kcl[p]) * bx + abs(kcr[p]) * by + abs(koff[p]))
+                size_max = v_size + 0.375 * k_size  # no sum is larger over the box
+                k_abs += dk_abs
+                reach = k_abs / 8.0
+                open_up = np.isfinite(up[j]) and (
+                    v_hi + reach > up[j] - slack * (size_max + abs(up[j])))
+                open_lo = np.isfinite(lo[j]) and (
+                    v_lo - reach < lo[j] + slack * (size_max + abs(lo[j])))
+                if not (open_up or open_lo):
+                    continue
+            for p in range(points - 1):
+                # where a curvature term keeps its sign on the whole polygon, the sums with the
+                # other sign lie inside those with this one there: an upper side needs only
+                # +|κ|, a lower side only −|κ| (0: either sign, both needed)
+                sign_k0 = sign_k1 = sign_dk = 0.0
+                if count > 0:
+                    sign_k0 = _sign_on(kcl[p], kcr[p], koff[p], xs, ys, count)
+                    sign_k1 = _sign_on(kcl[p + 1], kcr[p + 1], koff[p + 1], xs, ys, count)
+                    sign_dk = _sign_on(kcl[p + 1] - kcl[p], kcr[p + 1] - kcr[p],
+                                       koff[p + 1] - koff[p], xs, ys, count)
+                for q in range(16):
+                    i = p + (q >> 3)
+                    at = p + ((q >> 2) & 1)
+                    s = 1.0 if (q >> 1) & 1 else -1.0
+                    t = 1.0 if q & 1 else -1.0
+                    sign_k = sign_k0 if at == p else sign_k1
+                    need_up = np.isfinite(up[j]) and s * sign_k >= 0.0 and t * sign_dk >= 0.0
+                    need_lo = np.isfinite(lo[j]) and s * sign_k <= 0.0 and t * sign_dk <= 0.0
+                    if not (need_up or need_lo):
+                        continue
+                    cl = pcl[k, i, j] + (s * kcl[at] + t * (kcl[p + 1] - kcl[p])) / 8.0
+                    cr = pcr[k, i, j] + (s * kcr[at] + t * (kcr[p + 1] - kcr[p])) / 8.0
+                    off = poff[k, i, j] + (s * koff[at] + t * (koff[p + 1] - koff[p])) / 8.0
+                    if count > 0:
+                        hi, low = _extremes(cl, cr, off, xs, ys, count)
+                        size_q = abs(cl) * bx + abs(cr) * by + abs(off)
+                        if need_up and hi <= up[j] - slack * (size_q + abs(up[j])):
+                            need_up = False
+                        if need_lo and low >= lo[j] + slack * (size_q + abs(lo[j])):
+                            need_lo = False
+                    if not (need_up or need_lo):
+                        continue
+                    c_pt[found], c_joint[found] = i, j
+                    c_cl[found], c_cr[found], c_off[found] = cl, cr, off
+                    c_up[found], c_lo[found] = need_up, need_lo
+                    found += 1
+        if count > 0:  # cut the polygon by the sides left, then keep those that touch it
+            for c in range(found):
+                j = c_joint[c]
+                size_q = abs(c_cl[c]) * bx + abs(c_cr[c]) * by + abs(c_off[c])
+                for sign in (1.0, -1.0):
+                    if (sign > 0.0 and not c_up[c]) or (sign < 0.0 and not c_lo[c]):
+                        continue
+                    bound = up[j] if sign > 0.0 else lo[j]
+                    loose = slack * (size_q + abs(bound))
+                    count = _clip(xs, ys, count, sign * c_cl[c], sign * c_cr[c],
+                                  sign * (c_off[c] - bound) - loose, tx, ty)
+                    for v in range(count):
+                        xs[v] = tx[v]
+                        ys[v] = ty[v]
+                    if count == 0:
+                        break
+                if count == 0:
+                    break
+            if count > 0:
+                for c in range(found):
+                    j = c_joint[c]
+                    hi, low = _extremes(c_cl[c], c_cr[c], c_off[c], xs, ys, count)
+                    size_q = abs(c_cl[c]) * bx + abs(c_cr[c]) * by + abs(c_off[c])
+                    if c_up[c] and hi <= up[j] - touch * abs(up[j]) - 1e-12 * size_q:
+                        c_up[c] = False
+                    if c_lo[c] and low >= lo[j] + touch * abs(lo[j]) + 1e-12 * size_q:
+                        c_lo[c] = False
+        if out + 2 * found > cap:
+            cap = 2 * (out + 2 * found)
+            o_seg, o_pt = _grow_int(o_seg, cap), _grow_int(o_pt, cap)
+            o_joint = _grow_int(o_joint, cap)
+            o_cl, o_cr, o_off = _grow(o_cl, cap), _grow(o_cr, cap), _grow(o_off, cap)
+            o_lo, o_up = _grow(o_lo, cap), _grow(o_up, cap)
+        # one-sided rows. A side within ``merge`` of its limit of one already kept (of the same
+        # joint) on the polygon cut by all of them takes the place of the two: the one larger
+        # there (upper side; smaller, lower side). Outside that polygon the one left out may
+        # exceed the other by a little more; the check after the solve takes that back. Without
+        # a polygon (an unbounded box) the two merge into one that implies both for b ≥ 0:
+        # coefficients and constant the larger (upper) or the smaller (lower) of both.
+        first = out
+        for c in range(found):
+            j = c_joint[c]
+            size_q = abs(c_cl[c]) * bx + abs(c_cr[c]) * by + abs(c_off[c])
+            for sign in (1.0, -1.0):
+                if (sign > 0.0 and not c_up[c]) or (sign < 0.0 and not c_lo[c]):
+                    continue
+                bound = up[j] if sign > 0.0 else lo[j]
+                tol = merge * abs(bound) + 1e-12 * size_q
+                into = -1
+                for r in range(first, out):
+                    if o_joint[r] != j or (o_up[r] < np.inf) != (sign > 0.0):
+                        continue
+                    if count > 0:
+                        hi, low = _extremes(o_cl[r] - c_cl[c], o_cr[r] - c_cr[c],
+                                            o_off[r] - c_off[c], xs, ys, count)
+                        gap = max(abs(hi), abs(low))
+                    else:
+                        gap = (abs(o_cl[r] - c_cl[c]) * bx + abs(o_cr[r] - c_cr[c]) * by
+                               + abs(o_off[r] - c_off[c]))
+                    if gap <= tol:
+                        into = r
+                        break
+                if into >= 0:
+                    if count > 0:
+                        hi_r, low_r = _extremes(o_cl[into], o_cr[into], o_off[into], xs, ys,
+                                                count)
+                        hi_c, low_c = _extremes(c_cl[c], c_cr[c], c_off[c], xs, ys, count)
+                        if (hi_c > hi_r) if sign > 0.0 else (low_c < low_r):
+                            o_cl[into], o_cr[into], o_off[into] = c_cl[c], c_cr[c], c_off[c]
+                            o_pt[into] = c_pt[c]
+                    elif sign > 0.0:
+                        o_cl[into] = max(o_cl[into], c_cl[c])
+                        o_cr[into] = max(o_cr[into], c_cr[c])
+                        o_off[into] = max(o_off[into], c_off[c])
+                    else:
+                        o_cl[into] = min(o_cl[into], c_cl[c])
+                        o_cr[into] = min(o_cr[into], c_cr[c])
+                        o_off[into] = min(o_off[into], c_off[c])
+                    continue
+                o_seg[out], o_pt[out], o_joint[out] = k, c_pt[c], j
+                o_cl[out], o_cr[out], o_off[out] = c_cl[c], c_cr[c], c_off[c]
+                o_lo[out] = bound if sign < 0.0 else -np.inf
+                o_up[out] = bound if sign > 0.0 else np.inf
+                out += 1
+    return (o_seg[:out], o_pt[:out], o_joint[:out], o_cl[:out], o_cr[:out], o_off[:out],
+            o_lo[:out], o_up[:out])
+
+
+@_jit()
+def _grow(a, size):  # pragma: no cover - compiled
+    out = np.empty(size)
+    out[: a.size] = a
+    return out
+
+
+@_jit()
+def _grow_int(a, size):  # pragma: no cover - compiled
+    out = np.empty(size, dtype=np.int64)
+    out[: a.size] = a
+    return out
+
+
+@_jit()
+def _sign_on(cl, cr, off, xs, ys, count):  # pragma: no cover - compiled
+    """+1 where cl x + cr y + off ≥ 0 on every vertex of the polygon, −1 where it is ≤ 0 on
+    all (and not ≥ 0 on all), else 0."""
+    hi, low = _extremes(cl, cr, off, xs, ys, count)
+    if low >= 0.0:
+        return 1.0
+    if hi <= 0.0:
+        return -1.0
+    return 0.0
+
+
+@_jit()
+def _extremes(cl, cr, off, xs, ys, count):  # pragma: no cover - compiled
+    """The largest and the smallest value of cl x + cr y + off over the polygon's vertices."""
+    hi = -np.inf
+    low = np.inf
+    for v in range(count):
+        value = cl * xs[v] + cr * ys[v] + off
+        hi = max(hi, value)
+        low = min(low, value)
+    return hi, low

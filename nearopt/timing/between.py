@@ -12,8 +12,15 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..robot import PathCoefficients
-from .problem import SPEED_SAFETY, acceleration_coefficients, check_gravity, safe_limits
-from .solvers import largest_scale
+from .problem import (
+    BETWEEN_POINTS,
+    SPEED_SAFETY,
+    InteriorSamples,
+    acceleration_coefficients,
+    check_gravity,
+    interior_points,
+    safe_limits,
+)
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -32,33 +39,42 @@ class BetweenSamples:
     speeds along the exact path can bulge out by O(Δσ²) (or O(√Δσ) next to a rest end with
     damping). Every segment is smooth inside (the grid has a knot at each of the path's
     breakpoints), so they are evaluated at ``points`` interior points of every segment, and between
-    neighbouring points (h apart) bounded from above by max(f(a), f(c)) + h² max|f''| / 8 with
-    h² f'' taken from second differences (the error bound of linear interpolation; exact where f''
-    varies little over 2h), so that the check covers the segment between its points too. The
-    limits checked are those imposed at the samples (the safety margin included), so the error of
-    that bound is absorbed by the safety margin. Next to the rest ends the quantities are also
-    evaluated at points geometrically closer to σ = 0 and 1 (at rest b ∝ σ, so a damping torque
+    neighbouring points j, j + 1 (h apart) bounded from above by
+
+        max(f_j, f_{j+1}) + (max(|κ_j|, |κ_{j+1}|) + |κ_{j+1} − κ_j|) / 8,
+
+    κ ≈ h² f'' the second differences at the points (extrapolated linearly to the knots): the
+    error bound of linear interpolation, h² max|f''| / 8, with f'' allowed to vary between the
+    points by as much as it does from one point to the next (a peak of f'' between two points
+    is then covered; without that term the bound fell short by 3 % of the bulge on a curved
+    speed profile). The limits checked are those imposed at the samples (the safety margin
+    included). Stage 1 imposes this bound itself (rows of the two knots of every segment, see
+    :class:`~nearopt.timing.Discretisation`), so that one solve mostly keeps it. Next to the rest
+    ends the quantities are also evaluated at points geometrically closer to σ = 0 and 1 (at rest
+    b ∝ σ, so a damping torque
     d√b rises like √σ).
     """
 
-    def __init__(self, robot: Robot, path: Path, problem: TimingProblem, points: int = 4) -> None:
-        frac = np.arange(1, points + 1) / (points + 1)
+    def __init__(self, robot: Robot, path: Path, problem: TimingProblem,
+                 points: int = BETWEEN_POINTS) -> None:
         self.ds = np.diff(problem.sigma)
-        big_n = problem.segments
-        near = np.geomspace(1e-6, 0.5 / (points + 1), 8)
-        self.seg = np.concatenate(
-            [np.repeat(np.arange(big_n), points), np.zeros(8, int), np.full(8, big_n - 1)]
-        )
-        self.where = np.concatenate([np.tile(frac, big_n), near, 1.0 - near])
-        self.sigma = problem.sigma[self.seg] + self.where * self.ds[self.seg]
-        s = self.sigma * path.s_end
+        inside = problem.interior
+        if inside is None or inside.points != points:  # the problem's own points, if it has them
+            seg, where, sigma = interior_points(problem.sigma, points)
+            s = sigma * path.s_end
+            theta, dtheta = path(s, 0), path(s, 1) * path.s_end
+            ddtheta = path(s, 2) * path.s_end**2
+            inside = InteriorSamples(
+                points, seg, where, sigma, theta, dtheta,
+                robot.path_coefficients(theta, dtheta, ddtheta),
+                acceleration_coefficients(dtheta, ddtheta),
+            )
+        self.seg, self.where, self.sigma = inside.segment, inside.weight, inside.sigma
         self.points = points
-        self.theta = path(s, 0)
-        self.dtheta = path(s, 1) * path.s_end
-        ddtheta = path(s, 2) * path.s_end**2
-        self.coefs = [robot.path_coefficients(self.theta, self.dtheta, ddtheta)]
+        self.theta, self.dtheta = inside.theta, inside.dtheta
+        self.coefs = [inside.torque]
         if problem.acceleration is not None:
-            self.coefs.append(acceleration_coefficients(self.dtheta, ddtheta))
+            self.coefs.append(inside.acceleration)
         self.problem = problem
         order = np.argsort(self.sigma)  # gravity between the knots too
         g = self.coefs[0].g
@@ -75,9 +91,10 @@ class BetweenSamples:
     @staticmethod
     def _envelope(v: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Upper and lower bounds of a smooth function on each interval between points."""
-        curvature = np.abs(v[:, :-2] - 2.0 * v[:, 1:-1] + v[:, 2:])
-        curvature = np.concatenate([curvature[:, :1], curvature, curvature[:, -1:]], axis=1)
-        margin = np.maximum(curvature[:, :-1], curvature[:, 1:]) / 8.0
+        curvature = _curvature(v)
+        change = np.abs(np.diff(curvature, axis=1))
+        curvature = np.abs(curvature)
+        margin = (np.maximum(curvature[:, :-1], curvature[:, 1:]) + change) / 8.0
         return (
             np.maximum(v[:, :-1], v[:, 1:]) + margin,
             np.minimum(v[:, :-1], v[:, 1:]) - margin,
@@ -127,10 +144,48 @@ class BetweenSamples:
     def scale_into_limits(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
         """b scaled by the largest α ≤ 1 that keeps every quantity within its limits everywhere.
 
-        Since q(αb) = g + α(m a + c b) + √α dλ, a uniform α (found by bisection) restores the
-        limits at the cost of a relative slow-down of the order of the bulge.
+        Since q(αb) = g + α(m a + c b) + √α dλ, a uniform α restores the limits at the cost of a
+        relative slow-down of the order of the bulge. The bound of :meth:`excess` on an interval
+        between points (see the class) holds if and only if each of its sixteen sums
+        (:func:`_envelope_sums`) does; each is G + W α + D √α, so α is the smallest first
+        crossing of a limit by one of these, found in closed form.
         """
-        return largest_scale(lambda alpha: self.relative_excess(b, alpha)) * b
+        return self.largest_alpha(b) * b
+
+    def largest_alpha(self, b: NDArray[np.float64]) -> float:
+        """The largest α ∈ [0, 1] with every quantity of αb within its limits (see
+        :meth:`scale_into_limits`; the same bound as :meth:`excess`)."""
+        p = self.problem
+        acc = (np.diff(b) / (2.0 * self.ds))[:, None]
+        acc_pts = acc[self.seg]
+        b_pts = (b[self.seg] + self.where * (b[self.seg + 1] - b[self.seg]))[:, None]
+        inner = p.segments * self.points
+        alpha = 1.0
+        for quantity, coef in zip(p.quantities, self.coefs, strict=True):
+            lower, upper = safe_limits(quantity)
+            knots = quantity.coef
+            parts = [  # G, W, D of q = G + W α + D √α at the start, inside, the end
+                (k.g, k.m * a + k.c * bb, k.d * np.sqrt(bb))
+                for k, a, bb in ((_rows(knots, slice(0, -1)), acc, b[:-1, None]),
+                                 (coef, acc_pts, b_pts),
+                                 (_rows(knots, slice(1, None)), acc, b[1:, None]))
+            ]
+            terms = [self._along(*(part[t] for part in parts)) for t in range(3)]
+            hi, lo = self._envelope(terms[0] + terms[1] + terms[2])  # at α = 1
+            damped = bool(np.any(terms[2] != 0.0))
+            near = [part[inner:] for part in parts[1]]
+            for sign, limit, bound in ((1.0, upper, hi), (-1.0, lower, lo)):
+                finite = np.isfinite(limit)
+                # a sum G + W α within its limit at α = 0 (gravity) and at 1 is so in between;
+                # with damping (+ D √α) it may leave it in between: then every interval counts
+                over = finite & (damped | (sign * bound > sign * limit))
+                g, w, d = _envelope_sums(terms, over)
+                joint = np.nonzero(over)[2]
+                alpha = min(alpha, _first_crossing(sign * w, sign * d, sign * (g - limit[joint])))
+                g, w, d = (x[:, finite] for x in near)
+                alpha = min(alpha, _first_crossing(sign * w, sign * d,
+                                                   sign * (g - limit[finite])))
+        return alpha
 
     def _speed_squared(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
         """Upper bounds of θ̇_i² = b θ'_i² on each interval between points, (N, P + 1, n)."""
@@ -155,6 +210,60 @@ class BetweenSamples:
 
 def _rows(coef: PathCoefficients, at: slice) -> PathCoefficients:
     return PathCoefficients(*(x[at] for x in coef))
+
+
+def _curvature(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """Second differences κ of values along the segments' points (axis 1), at every point: at
+    the inner points as they are, at both ends extrapolated linearly from the two next ones
+    (κ_0 = 2κ_1 − κ_2), so that a second derivative that grows towards an end of the segment
+    is not underestimated there (the bound of an end interval uses κ at both its ends)."""
+    curvature = v[:, :-2] - 2.0 * v[:, 1:-1] + v[:, 2:]
+    if curvature.shape[1] < 2:
+        return np.concatenate([curvature[:, :1], curvature, curvature[:, -1:]], axis=1)
+    first = 2.0 * curvature[:, :1] - curvature[:, 1:2]
+    last = 2.0 * curvature[:, -1:] - curvature[:, -2:-1]
+    return np.concatenate([first, curvature, last], axis=1)
+
+
+def _envelope_sums(
+    terms: list[NDArray[np.float64]], where: NDArray[np.bool_]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """For G, W, D along the segments, (N, P + 2, n) each: the sixteen sums
+    q_i ± κ_l / 8 ± (κ_{j+1} − κ_j) / 8 of every interval j (i, l ∈ {j, j + 1}, κ the second
+    differences of :func:`_curvature`) where ``where`` ((N, P + 1, n)) is true, in the order of
+    ``np.nonzero(where)`` (16 rows each), for G, W and D: the bound of
+    :meth:`BetweenSamples._envelope` lies within a limit if and only if all of them do."""
+    seg, j, joint = np.nonzero(where)
+    out = []
+    for v in terms:
+        curvature = _curvature(v)
+        change = curvature[seg, j + 1, joint] - curvature[seg, j, joint]
+        sums = [v[seg, j + i, joint] + s * curvature[seg, j + at, joint] / 8.0 + t * change / 8.0
+                for i in (0, 1) for at in (0, 1) for s in (1.0, -1.0) for t in (1.0, -1.0)]
+        out.append(np.stack(sums))
+    return out[0], out[1], out[2]
+
+
+def _first_crossing(
+    w: NDArray[np.float64], d: NDArray[np.float64], c: NDArray[np.float64]
+) -> float:
+    """The largest α ∈ [0, 1] with c + d t + w t² ≤ 0 for all t = √α' ≤ √α, every element
+    (0 where some c > 0 already, or c = 0 and the sum rises from there)."""
+    c, d, w = c.ravel(), d.ravel(), w.ravel()
+    if np.any(c > 0.0) or np.any((c == 0.0) & ((d > 0.0) | ((d == 0.0) & (w > 0.0)))):
+        return 0.0
+    with np.errstate(divide="ignore", invalid="ignore"):
+        disc = d * d - 4.0 * w * c
+        root = np.sqrt(np.maximum(disc, 0.0))
+        # the roots q / w and c / q, q = −(d + sign(d) √disc) / 2 (no cancellation)
+        q = -0.5 * (d + np.where(d >= 0.0, root, -root))
+        t = np.stack([q / w, c / q])
+    t = np.where(np.isfinite(t) & (t > 0.0) & (disc >= 0.0), t, np.inf)
+    linear = (w == 0.0) & (d > 0.0)
+    with np.errstate(divide="ignore"):
+        t_lin = np.where(linear, -c / np.where(linear, d, 1.0), np.inf)
+    t = np.where(w == 0.0, t_lin, np.min(t, axis=0))
+    return float(min(1.0, np.min(t) ** 2)) if t.size else 1.0
 
 
 def uniform_slow_down(between: BetweenSamples, b: NDArray[np.float64]) -> NDArray[np.float64]:

@@ -123,14 +123,25 @@ def solve_conic(
         trip_v.append(np.asarray(v, dtype=float))
 
     # 1. linear rows (finite sides), z ≥ 0, z ≤ z_upper, p within its bounds: A x + s = rhs, s ≥ 0
+    # each row divided by its largest finite limit (or its largest coefficient where that is 0),
+    # as the kernel does: rows whose coefficients are ∝ 1/Δσ would otherwise set Clarabel's
+    # feasibility tolerance far above the limits' own scale
     mat = rows.matrix.tocoo()
+    row_scale = np.maximum(np.where(np.isfinite(rows.upper), np.abs(rows.upper), 0.0),
+                           np.where(np.isfinite(rows.lower), np.abs(rows.lower), 0.0))
+    if mat.nnz:
+        largest = np.zeros(row_scale.size)
+        np.maximum.at(largest, mat.row, np.abs(mat.data))
+        row_scale = np.where(row_scale > 0.0, row_scale, largest)
+    row_scale = np.where(row_scale > 0.0, row_scale, 1.0)
     count = 0
     for sign, side in ((1.0, rows.upper), (-1.0, -rows.lower)):
         finite = np.isfinite(side)
         index = np.cumsum(finite) - 1  # row of each finite side among them
         keep = finite[mat.row]
-        put(count + index[mat.row[keep]], mat.col[keep], sign * mat.data[keep])
-        rhs.append(side[finite])
+        put(count + index[mat.row[keep]], mat.col[keep],
+            sign * mat.data[keep] / row_scale[mat.row[keep]])
+        rhs.append(side[finite] / row_scale[finite])
         count += int(finite.sum())
     put(count + np.arange(nz), iz + np.arange(nz), -np.ones(nz))
     rhs.append(np.zeros(nz))

@@ -16,7 +16,17 @@ in blocks (:class:`RowBlocks`):
 * acceleration: θ̈_{r,i} = θ'_i a_seg + θ''_i b_node, likewise, for joints with a limit;
 * speed: b_k θ'_i(σ_k)² ≤ v_i² at every free knot, one row per joint that moves and has a limit;
 * interior speed: ((1 − w) b_k + w b_{k+1}) θ'_i(σ_p)² ≤ v_i² at points inside segments, where the
-  knots' own rows do not imply it.
+  knots' own rows do not imply it;
+* between the samples (blocks ``torque_between``, ``acceleration_between``, ``speed_between``):
+  the bound of :class:`~nearopt.timing.BetweenSamples` on every interval between the points of
+  ``problem.interior`` (b = (1 − w) b_k + w b_{k+1} and a = a_k there, so the values and their
+  second differences are rows of the segment's two knots): the sums q_i ± κ_l/8 ± Δκ/8 of
+  :func:`~nearopt.timing._kernels.envelope_rows`, for the joints with a limit, on the sides that
+  the segment's samples do not imply (most are: each segment's polygon of (b_k, b_{k+1}) is
+  clipped in 2-D); for a damped quantity, its values at those points instead (the damping's √b
+  at the nearer knot, exact in the first and the last segment, where one knot is at rest), and
+  always its values at the points next to the rest ends. So one solve holds the limits between
+  the samples too.
 
 Every row couples at most two neighbouring knots (those of its segment): it is held in *pair form*,
 ``coef_left · b_left + coef_right · b_{left+1} + sqrt_coef · √b_sqrt_node + offset``, from which
@@ -41,9 +51,17 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from ..cost import Cost
+    from ..robot import PathCoefficients
     from .problem import PathQuantity, TimingProblem
 
 __all__ = ["Discretisation", "RowBlocks", "LinearRows"]
+
+# rows between the samples of one joint that differ by less than MERGE (relative to their size)
+# are merged into one that implies both (the optimum is at most that much slower); those that cut
+# into the polygon the others leave by less than TOUCH are left out (the motion may exceed their
+# bound by that much, which the check after the solve takes back by a uniform slow-down)
+MERGE = 1e-7
+TOUCH = 1e-7
 
 
 class RowBlocks(NamedTuple):
@@ -53,6 +71,9 @@ class RowBlocks(NamedTuple):
     acceleration: slice
     speed: slice
     interior_speed: slice
+    torque_between: slice = slice(0, 0)
+    acceleration_between: slice = slice(0, 0)
+    speed_between: slice = slice(0, 0)
 
 
 class LinearRows(NamedTuple):
@@ -88,8 +109,12 @@ class Discretisation:
     joint
         The joint of every row, shape (R,).
     location
-        Where every row lies: the sample r (torque, acceleration), the knot k (speed) or the
-        interior point p (interior speed), shape (R,).
+        Where every row lies: the sample r (torque, acceleration), the knot k (speed), the
+        interior point p (interior speed) or the segment k (the rows between the samples),
+        shape (R,).
+    position
+        For the rows between the samples, w ∈ [0, 1] of the point in its segment whose value
+        the row bounds (NaN for the other rows), shape (R,).
     z_upper
         Upper bounds on z from ``problem.b_upper`` (inf where none), shape (N−1,).
     z_cap
@@ -121,10 +146,11 @@ class Discretisation:
         self.sqrt_node = np.zeros(self.offset.size, dtype=int)
         torque_rows = self.blocks.torque
         self.sqrt_node[torque_rows] = self.node[self.location[torque_rows]]
-        self.has_damping = bool(np.any(self.sqrt_coef != 0.0))
         b_upper = np.full(big_n + 1, np.inf) if p.b_upper is None else p.b_upper
         self.z_upper = np.asarray(b_upper[1:-1], dtype=float)
         self._reduce()
+        self._add_inside()
+        self.has_damping = bool(np.any(self.sqrt_coef != 0.0))
 
     @cached_property
     def matrix(self) -> sp.csr_matrix:
@@ -165,6 +191,161 @@ class Discretisation:
                 keep &= bound < np.maximum(ends[k], ends[k + 1])
         self.solver_index = np.concatenate(
             [np.arange(self.blocks.speed.start), inside[keep]]
+        )
+
+    def _add_inside(self) -> None:
+        """Append the rows between the samples (the ``*_between`` blocks) that the samples
+        leave open."""
+        p = self.problem
+        inside = p.interior
+        end = self.offset.size
+        self.position = np.full(end, np.nan)
+        starts = [end]
+        if inside is not None:
+            # the samples' undamped rows, by segment: the polygon each segment's samples allow
+            sample_rows = np.arange(self.blocks.acceleration.stop)
+            sample_rows = sample_rows[self.sqrt_coef[sample_rows] == 0.0]
+            sample_rows = sample_rows[np.argsort(self.left[sample_rows], kind="stable")]
+            seg_rows = np.searchsorted(self.left[sample_rows], np.arange(p.segments + 1))
+            polygon = (seg_rows, self.coef_left[sample_rows], self.coef_right[sample_rows],
+                       self.offset[sample_rows], self.lower[sample_rows],
+                       self.upper[sample_rows], np.concatenate([[0.0], self.z_cap, [0.0]]))
+            kinds = [(p.torque, inside.torque),
+                     (p.acceleration, inside.acceleration) if p.acceleration is not None else None,
+                     "speed"]
+            for kind in kinds:
+                if kind is not None:
+                    rows = (self._speed_between(polygon) if kind == "speed"
+                            else self._between(*kind, polygon))
+                    for part in rows:
+                        self._append(part)
+                starts.append(self.offset.size)
+        else:
+            starts += [end] * 3
+        self.blocks = self.blocks._replace(
+            torque_between=slice(starts[0], starts[1]),
+            acceleration_between=slice(starts[1], starts[2]),
+            speed_between=slice(starts[2], starts[3]),
+        )
+        self.solver_index = np.concatenate([self.solver_index, np.arange(end, self.offset.size)])
+
+    _FIELDS = ("left", "coef_left", "coef_right", "sqrt_coef", "sqrt_node", "offset", "lower",
+               "upper", "joint", "location", "position")
+
+    def _append(self, rows: tuple) -> None:
+        for name, new in zip(self._FIELDS, rows, strict=True):
+            setattr(self, name, np.concatenate([getattr(self, name), new]))
+
+    def _between(self, quantity: PathQuantity, coef: PathCoefficients,
+                 polygon: tuple) -> list[tuple]:
+        """A quantity's rows between the samples: the envelope rows of :func:`envelope_rows`
+        on the evenly spaced points if it is undamped, else its value at those points (the
+        damping's √b at the nearer knot); its value at the points next to the rest ends."""
+        from ._kernels import envelope_rows, needed_inside
+
+        p = self.problem
+        inside = p.interior
+        big_n, points = p.segments, inside.points
+        even = big_n * points
+        limited = np.flatnonzero(np.isfinite(quantity.lower) | np.isfinite(quantity.upper))
+        if limited.size == 0:
+            return []
+        lower, upper = safe_limits(quantity)
+        out = []
+        damped = bool(np.any(quantity.coef.d != 0.0) or np.any(coef.d != 0.0))
+        if not damped:
+            # pair coefficients at the P + 2 points of every segment, (N, P + 2, J)
+            two_ds = (2.0 * self.ds)[:, None, None]
+            w = np.concatenate([[0.0], inside.weight[:points], [1.0]])[None, :, None]
+            m = self._along(quantity.coef.m, coef.m[:even], limited)
+            c = self._along(quantity.coef.c, coef.c[:even], limited)
+            g = self._along(quantity.coef.g, coef.g[:even], limited)
+            pcl = c * (1.0 - w) - m / two_ds
+            pcr = c * w + m / two_ds
+            seg, point, joint, cl, cr, off, lo, up = envelope_rows(
+                *polygon, np.ascontiguousarray(pcl), np.ascontiguousarray(pcr),
+                np.ascontiguousarray(g), lower[limited], upper[limited], 1e-9, TOUCH, MERGE)
+            zero = np.zeros(seg.size)
+            out.append((seg, cl, cr, zero, seg.copy(), off, lo, up, limited[joint], seg.copy(),
+                        w.ravel()[point]))
+            chosen = np.arange(even, inside.segment.size)  # the points next to the rest ends
+        else:
+            chosen = np.arange(inside.segment.size)
+        rows = self._inside(quantity, coef, limited, chosen)
+        left, cl, cr, sd, sn, off, lo, up = rows[:8]
+        order = np.argsort(left, kind="stable")
+        rows = tuple(x[order] for x in rows)
+        left, cl, cr, sd, sn, off, lo, up = rows[:8]
+        need_up, need_lo = needed_inside(
+            *polygon, np.searchsorted(left, np.arange(big_n + 1)), cl, cr, off, sd,
+            (sn == left + 1).astype(float), lo, up, 1e-9,
+        )
+        need_up &= np.isfinite(up)
+        need_lo &= np.isfinite(lo)
+        keep = need_up | need_lo
+        rows = (*rows[:6], np.where(need_lo, lo, -np.inf), np.where(need_up, up, np.inf),
+                *rows[8:])
+        out.append(tuple(x[keep] for x in rows))
+        return out
+
+    def _speed_between(self, polygon: tuple) -> list[tuple]:
+        """The envelope rows of the joint speeds² b θ'_i² between the samples (the bound of
+        :meth:`~nearopt.timing.BetweenSamples.speed_excess`)."""
+        from ._kernels import envelope_rows
+
+        p = self.problem
+        inside = p.interior
+        limited = np.flatnonzero(np.isfinite(p.velocity))
+        if limited.size == 0:
+            return []
+        big_n, points = p.segments, inside.points
+        w = np.concatenate([[0.0], inside.weight[:points], [1.0]])[None, :, None]
+        slope2 = self._along(p.dtheta, inside.dtheta[: big_n * points], limited) ** 2
+        upper = p.velocity[limited] ** 2 * (1.0 - 2.0 * SPEED_SAFETY)
+        seg, point, joint, cl, cr, off, lo, up = envelope_rows(
+            *polygon, np.ascontiguousarray((1.0 - w) * slope2), np.ascontiguousarray(w * slope2),
+            np.zeros(slope2.shape), np.full(limited.size, -np.inf), upper, 1e-9, TOUCH, MERGE)
+        zero = np.zeros(seg.size)
+        return [(seg, cl, cr, zero, seg.copy(), off, lo, up, limited[joint], seg.copy(),
+                 w.ravel()[point])]
+
+    def _along(self, at_knots: NDArray[np.float64], inside: NDArray[np.float64],
+               joints: NDArray[np.int64]) -> NDArray[np.float64]:
+        """Values at the start, the evenly spaced points and the end of every segment, for the
+        given joints, (N, P + 2, J)."""
+        big_n = self.problem.segments
+        inner = inside[:, joints].reshape(big_n, -1, joints.size)
+        return np.concatenate([at_knots[:-1, None][:, :, joints], inner,
+                               at_knots[1:, None][:, :, joints]], axis=1)
+
+    def _inside(self, quantity: PathQuantity, coef: PathCoefficients,
+                limited: NDArray[np.int64], chosen: NDArray[np.int64]) -> tuple:
+        """A quantity's rows at the interior points ``chosen``, for the joints ``limited``:
+        the fields of :attr:`_FIELDS` (location: the segment; position: the point's w)."""
+        p = self.problem
+        inside = p.interior
+        big_n = p.segments
+        k, w = inside.segment[chosen], inside.weight[chosen]
+        lower, upper = safe_limits(quantity)
+        slope = coef.m[chosen][:, limited] / (2.0 * self.ds[k])[:, None]
+        curv = coef.c[chosen][:, limited]
+        # √b at a point: exact in the end segments (one knot at rest), else at the nearer knot
+        node = np.where(k == 0, 1, np.where(k == big_n - 1, big_n - 1, np.where(w < 0.5, k, k + 1)))
+        root = np.where(k == 0, np.sqrt(w), np.where(k == big_n - 1, np.sqrt(1.0 - w), 1.0))
+        count = k.size
+        joints = limited.size
+        return (
+            np.tile(k, joints),
+            (curv * (1.0 - w)[:, None] - slope).T.ravel(),
+            (curv * w[:, None] + slope).T.ravel(),
+            (coef.d[chosen][:, limited] * root[:, None]).T.ravel(),
+            np.tile(node, joints),
+            coef.g[chosen][:, limited].T.ravel(),
+            np.repeat(lower[limited], count),
+            np.repeat(upper[limited], count),
+            np.repeat(limited, count),
+            np.tile(k, joints),
+            np.tile(w, joints),
         )
 
     # ---------------------------------------------------------------- building the rows

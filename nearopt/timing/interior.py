@@ -308,15 +308,28 @@ def load_kernel() -> None:
     """
     from ..robot import PathCoefficients
     from .discretisation import Discretisation
-    from .problem import PathQuantity, TimingProblem
+    from .problem import (
+        InteriorSamples,
+        PathQuantity,
+        TimingProblem,
+        acceleration_coefficients,
+        interior_points,
+    )
 
     sigma = np.linspace(0.0, 1.0, 5)  # a damped rotor with a speed limit, timed for energy
     ones = np.ones((5, 1))
     coef = PathCoefficients(ones, 0.0 * ones, 0.1 * ones, 0.0 * ones)
+    segment, weight, at = interior_points(sigma)  # and its rows between the samples
+    inner = np.ones((at.size, 1))
+    inside = InteriorSamples(
+        4, segment, weight, at, at[:, None], inner,
+        PathCoefficients(inner, 0.0 * inner, 0.1 * inner, 0.0 * inner),
+        acceleration_coefficients(inner, 0.0 * inner),
+    )
     problem = TimingProblem(
         sigma=sigma, theta=sigma[:, None], dtheta=ones, ddtheta=0.0 * ones,
         torque=PathQuantity(coef, np.array([-1.0]), np.array([1.0])),
-        velocity=np.array([1.0]), joint_names=("rotor",),
+        velocity=np.array([1.0]), joint_names=("rotor",), interior=inside,
     )
     solve_interior(Discretisation(problem), np.array([0.1]))
 

@@ -26,6 +26,9 @@ __all__ = [
     "SPEED_SAFETY",
     "PathQuantity",
     "InteriorSpeed",
+    "InteriorSamples",
+    "BETWEEN_POINTS",
+    "interior_points",
     "TimingProblem",
     "acceleration_coefficients",
     "build_timing_problem",
@@ -76,6 +79,56 @@ class InteriorSpeed(NamedTuple):
     dtheta: NDArray[np.float64]
 
 
+BETWEEN_POINTS = 4  # points inside every segment where the torques are held and checked
+
+
+class InteriorSamples(NamedTuple):
+    """Points inside the segments where the torques (and limited accelerations) are held too.
+
+    ``points`` evenly spaced points inside every segment and 8 geometrically closer to each rest
+    end (inside the first and the last segment, where a damping torque d√b rises like √σ): at
+    σ_p = σ_k + w_p Δσ_k, b = (1 − w_p) b_k + w_p b_{k+1} and a = a_k, so each quantity there,
+    m a + c b + d √b + g, is a row of the segment's two knots, like those at its samples. The
+    same points are where :class:`~nearopt.timing.BetweenSamples` bounds the motion between them.
+
+    Attributes
+    ----------
+    points
+        Evenly spaced points per segment (the first ``points · N`` rows below, segment-major).
+    segment, weight, sigma
+        Segment k, weight w_p and σ_p of every point, shape (P,).
+    theta, dtheta
+        θ(σ_p) and dθ/dσ there, shape (P, n).
+    torque
+        The torque's coefficients m, c, d, g there, each (P, n).
+    acceleration
+        The joint acceleration's coefficients there (θ'(σ_p), θ''(σ_p)).
+    """
+
+    points: int
+    segment: NDArray[np.int64]
+    weight: NDArray[np.float64]
+    sigma: NDArray[np.float64]
+    theta: NDArray[np.float64]
+    dtheta: NDArray[np.float64]
+    torque: PathCoefficients
+    acceleration: PathCoefficients
+
+
+def interior_points(
+    sigma: NDArray[np.float64], points: int = BETWEEN_POINTS
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """Segment, weight and σ of the points of :class:`InteriorSamples` on knots ``sigma``."""
+    big_n = sigma.size - 1
+    frac = np.arange(1, points + 1) / (points + 1)
+    near = np.geomspace(1e-6, 0.5 / (points + 1), 8)
+    segment = np.concatenate(
+        [np.repeat(np.arange(big_n), points), np.zeros(8, int), np.full(8, big_n - 1)]
+    )
+    weight = np.concatenate([np.tile(frac, big_n), near, 1.0 - near])
+    return segment, weight, sigma[segment] + weight * np.diff(sigma)[segment]
+
+
 @dataclass(frozen=True)
 class TimingProblem:
     """Stage 1 on a grid, as arrays (no robot model needed: the kernel's input).
@@ -103,6 +156,9 @@ class TimingProblem:
     b_upper
         Extra upper bounds on b at the knots, shape (N+1,) (inf where none), set where the speed
         bulges out between samples.
+    interior
+        Points inside the segments where the torque (and acceleration) rows are imposed too, so
+        that one solve mostly holds the limits between the samples; None: at the samples only.
     """
 
     sigma: NDArray[np.float64]
@@ -115,6 +171,7 @@ class TimingProblem:
     acceleration: PathQuantity | None = None
     interior_speed: InteriorSpeed | None = None
     b_upper: NDArray[np.float64] | None = None
+    interior: InteriorSamples | None = None
 
     @property
     def segments(self) -> int:
@@ -171,15 +228,25 @@ def build_timing_problem(
         raise ConfigurationError(f"the path has {path.dof} joints, {robot.name} has {robot.n}")
     breaks = np.asarray(getattr(path, "breakpoints", ()), dtype=float) / path.s_end
     sigma = grid_knots(int(grid), breaks)
-    s = sigma * path.s_end
-    theta = path(s, 0)
-    dtheta = path(s, 1) * path.s_end  # d/dσ = s_e d/ds
-    ddtheta = path(s, 2) * path.s_end**2
+    # the path and its dynamics at the knots and at the interior points, in one batch
+    segment, weight, at = interior_points(sigma)
+    both = np.concatenate([sigma, at]) * path.s_end
+    count = sigma.size
+    theta_all = path(both, 0)
+    dtheta_all = path(both, 1) * path.s_end  # d/dσ = s_e d/ds
+    ddtheta_all = path(both, 2) * path.s_end**2
+    coef_all = robot.path_coefficients(theta_all, dtheta_all, ddtheta_all)
+    theta, dtheta, ddtheta = theta_all[:count], dtheta_all[:count], ddtheta_all[:count]
     lim = robot.limits
     torque = PathQuantity(
-        robot.path_coefficients(theta, dtheta, ddtheta),
+        PathCoefficients(*(x[:count] for x in coef_all)),
         np.array(lim.effort_lower),
         np.array(lim.effort_upper),
+    )
+    interior = InteriorSamples(
+        BETWEEN_POINTS, segment, weight, at, theta_all[count:], dtheta_all[count:],
+        PathCoefficients(*(x[count:] for x in coef_all)),
+        acceleration_coefficients(dtheta_all[count:], ddtheta_all[count:]),
     )
     acceleration = None
     if np.any(np.isfinite(lim.acceleration)):
@@ -188,14 +255,14 @@ def build_timing_problem(
             np.array(lim.acceleration),
         )
     velocity = np.array(lim.velocity) if velocity_limits else np.full(robot.n, np.inf)
-    interior = None
+    interior_speed = None
     if np.any(np.isfinite(velocity)):
         # three points inside every segment, where |θ'| of a curved path may peak
         big_n = sigma.size - 1
         segment = np.repeat(np.arange(big_n), 3)
         weight = np.tile([0.25, 0.5, 0.75], big_n)
         at = sigma[segment] + weight * np.diff(sigma)[segment]
-        interior = InteriorSpeed(segment, weight, at, path(at * path.s_end, 1) * path.s_end)
+        interior_speed = InteriorSpeed(segment, weight, at, path(at * path.s_end, 1) * path.s_end)
     return TimingProblem(
         sigma=sigma,
         theta=theta,
@@ -205,7 +272,8 @@ def build_timing_problem(
         velocity=velocity,
         joint_names=tuple(robot.joint_names),
         acceleration=acceleration,
-        interior_speed=interior,
+        interior_speed=interior_speed,
+        interior=interior,
     )
 
 
@@ -233,11 +301,17 @@ def check_gravity(
     """Raise InfeasiblePathError where gravity alone leaves the torque limits (b → 0 ⇒ u → g),
     less the safety margin.
 
-    By default at the problem's knots; ``g``, ``sigma``, ``theta`` give other points of the path
-    (sorted by σ), e.g. those between the knots.
+    By default at the problem's knots and its points inside the segments (``interior``);
+    ``g``, ``sigma``, ``theta`` give other points of the path (sorted by σ).
     """
     if g is None:
         g, sigma, theta = problem.torque.coef.g, problem.sigma, problem.theta
+        inside = problem.interior
+        if inside is not None:  # and at the points inside the segments, in order of σ
+            order = np.argsort(np.concatenate([sigma, inside.sigma]), kind="stable")
+            g = np.concatenate([g, inside.torque.g])[order]
+            sigma = np.concatenate([sigma, inside.sigma])[order]
+            theta = np.concatenate([theta, inside.theta])[order]
     lower, upper = problem.torque.lower, problem.torque.upper
     safe_lower, safe_upper = safe_limits(problem.torque)
     over = g - safe_upper

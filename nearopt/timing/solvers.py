@@ -79,6 +79,10 @@ class TimingSolution:
         Iterations of that back end.
     message
         The solver's own words.
+    slowed
+        1 − α of the uniform scaling αb that put the back end's answer within every row (0: it
+        held them as it was; Clarabel's answers leave rows by its feasibility tolerance, which
+        on rows with large, nearly cancelling coefficients is 1e-7 of a limit and more).
     """
 
     b: NDArray[np.float64]
@@ -87,6 +91,7 @@ class TimingSolution:
     solver: TimingMethod
     iterations: int
     message: str
+    slowed: float = 0.0
 
 
 def solve_timing(
@@ -174,10 +179,11 @@ def _solve_builtin(
         if sol.timed_out:
             raise out_of_time(disc.problem, time_limit)
         if sol.converged:
-            z = into_limits(disc, sol.z)
+            z, alpha = into_limits(disc, sol.z)
             return TimingSolution(
                 b=disc.b(z),
                 objective=disc.torque_cost(z, weights),
+                slowed=1.0 - alpha,
                 status=TimingStatus.OPTIMAL,
                 solver=TimingMethod.INTERIOR,
                 iterations=sol.iterations,
@@ -245,7 +251,7 @@ def _solve_convex(
     status = solutions[-1].status
     if not is_solved(status):
         raise SolverError(f"Clarabel did not solve the stage-1 SOCP: {status}", status=status)
-    z = into_limits(disc, z)
+    z, alpha = into_limits(disc, z)
     return TimingSolution(
         b=disc.b(z),
         objective=disc.objective(z, cost)[0],
@@ -254,6 +260,7 @@ def _solve_convex(
         iterations=iterations,
         message=f"{status} in {rounds} round(s)"
         + (" (damping linearised)" if disc.has_damping else ""),
+        slowed=1.0 - alpha,
     )
 
 
@@ -330,7 +337,7 @@ def _solve_nlp(
         )
     if not np.all(np.isfinite(res.x)):
         raise SolverError(f"trust-constr returned a non-finite timing: {res.message}")
-    z = into_limits(disc, np.maximum(res.x, lb))
+    z, alpha = into_limits(disc, np.maximum(res.x, lb))
     return TimingSolution(
         b=disc.b(z),
         objective=disc.objective(z, cost)[0],
@@ -338,6 +345,7 @@ def _solve_nlp(
         solver=TimingMethod.NLP,
         iterations=int(res.nit),
         message=str(res.message),
+        slowed=1.0 - alpha,
     )
 
 
@@ -387,7 +395,12 @@ def largest_scale(excess: Callable[[float], float]) -> float:
             break
         mid = (lo * e_hi - hi * e_lo) / (e_hi - e_lo)
         if not lo < mid < hi:
-            mid = 0.5 * (lo + hi)
+            # a root within rounding of an end (an excess of 1e-16 at α = 1): just inside it,
+            # not the midpoint (from which false position with a halved end value crawls back)
+            near = 1e-12 * (hi - lo)
+            mid = hi - near if mid >= hi else lo + near
+            if not lo < mid < hi:
+                mid = 0.5 * (lo + hi)
         e_mid = excess(mid)
         if e_mid <= 0.0:
             lo, e_lo = mid, e_mid
@@ -398,14 +411,17 @@ def largest_scale(excess: Callable[[float], float]) -> float:
     return lo
 
 
-def into_limits(disc: Discretisation, z: NDArray[np.float64]) -> NDArray[np.float64]:
-    """Scale b by the largest α ≤ 1 that puts every row within its limits.
+def into_limits(
+    disc: Discretisation, z: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], float]:
+    """αb with the largest α ≤ 1 that puts every row within its limits, and α.
 
     Every row is monotone along αb from α = 0, where it holds (torque g inside the limits after
     :func:`~nearopt.timing.check_gravity`, zero accelerations and speeds).
     """
     z = np.minimum(z, disc.z_upper)
-    return largest_scale(lambda alpha: disc.excess(alpha * z)) * z
+    alpha = largest_scale(lambda alpha: disc.excess(alpha * z))
+    return alpha * z, alpha
 
 
 def _tridiagonal_hessian(
