@@ -405,17 +405,23 @@ def redundant_rows(order, starts, left, cl, cr, sd, node, const, ds, cap_b):  # 
 @_jit()
 def _clip(xs, ys, count, a, b, c, out_x, out_y):  # pragma: no cover - compiled
     """The convex polygon (xs, ys)[:count] cut by a x + b y + c ≤ 0 (Sutherland–Hodgman), into
-    out_x, out_y; returns its vertex count."""
+    out_x, out_y; returns its vertex count, or −1 if that would not fit in out_x (a polygon
+    that rounding made not quite convex can gain more than one vertex per cut)."""
     kept = 0
+    room = out_x.size
     for i in range(count):
         j = i + 1 if i + 1 < count else 0
         fp = a * xs[i] + b * ys[i] + c
         fq = a * xs[j] + b * ys[j] + c
         if fp <= 0.0:
+            if kept >= room:
+                return -1
             out_x[kept] = xs[i]
             out_y[kept] = ys[i]
             kept += 1
         if (fp < 0.0 < fq) or (fq < 0.0 < fp):
+            if kept >= room:
+                return -1
             t = fp / (fp - fq)
             out_x[kept] = xs[i] + t * (xs[j] - xs[i])
             out_y[kept] = ys[i] + t * (ys[j] - ys[i])
@@ -488,7 +494,8 @@ def needed_inside(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b,
 def _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack, xs, ys, tx,
              ty):  # pragma: no cover - compiled
     """The polygon of (b_k, b_{k+1}) that segment k's sample rows allow (see
-    :func:`needed_inside`), into xs, ys; its vertex count (−1 where the box is unbounded)."""
+    :func:`needed_inside`), into xs, ys; its vertex count (0: empty; −1 where the box is
+    unbounded or rounding left no convex polygon)."""
     bx, by = cap_b[k], cap_b[k + 1]
     if not (np.isfinite(bx) and np.isfinite(by)):
         return -1
@@ -504,11 +511,11 @@ def _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack,
             loose = slack * (size_r + abs(bound))
             count = _clip(xs, ys, count, sign * row_cl[r], sign * row_cr[r],
                           sign * (row_off[r] - bound) - loose, tx, ty)
+            if count <= 0:
+                return count  # empty, or not a polygon any more (−1): no use either way
             for v in range(count):
                 xs[v] = tx[v]
                 ys[v] = ty[v]
-            if count == 0:
-                return 0
     return count
 
 
@@ -659,12 +666,12 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
                     loose = slack * (size_q + abs(bound))
                     count = _clip(xs, ys, count, sign * c_cl[c], sign * c_cr[c],
                                   sign * (c_off[c] - bound) - loose, tx, ty)
+                    if count <= 0:
+                        break
                     for v in range(count):
                         xs[v] = tx[v]
                         ys[v] = ty[v]
-                    if count == 0:
-                        break
-                if count == 0:
+                if count <= 0:
                     break
             if count > 0:
                 for c in range(found):
@@ -682,8 +689,8 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
             o_cl, o_cr, o_off = _grow(o_cl, cap), _grow(o_cr, cap), _grow(o_off, cap)
             o_lo, o_up = _grow(o_lo, cap), _grow(o_up, cap)
         # one-sided rows. A side within ``merge`` of its limit of one already kept (of the same
-        # joint) on the polygon cut by all of them takes the place of the two: the one larger
-        # there (upper side; smaller, lower side). Outside that polygon the one left out may
+        # joint and point) on the polygon cut by all of them takes the place of the two: the one
+        # larger there (upper side; smaller, lower side). Outside that polygon the one left out may
         # exceed the other by a little more; the check after the solve takes that back. Without
         # a polygon (an unbounded box) the two merge into one that implies both for b ≥ 0:
         # coefficients and constant the larger (upper) or the smaller (lower) of both.
@@ -698,7 +705,8 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
                 tol = merge * abs(bound) + 1e-12 * size_q
                 into = -1
                 for r in range(first, out):
-                    if o_joint[r] != j or (o_up[r] < np.inf) != (sign > 0.0):
+                    if (o_joint[r] != j or o_pt[r] != c_pt[c]
+                            or (o_up[r] < np.inf) != (sign > 0.0)):
                         continue
                     if count > 0:
                         hi, low = _extremes(o_cl[r] - c_cl[c], o_cr[r] - c_cr[c],
@@ -717,7 +725,6 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
                         hi_c, low_c = _extremes(c_cl[c], c_cr[c], c_off[c], xs, ys, count)
                         if (hi_c > hi_r) if sign > 0.0 else (low_c < low_r):
                             o_cl[into], o_cr[into], o_off[into] = c_cl[c], c_cr[c], c_off[c]
-                            o_pt[into] = c_pt[c]
                     elif sign > 0.0:
                         o_cl[into] = max(o_cl[into], c_cl[c])
                         o_cr[into] = max(o_cr[into], c_cr[c])
