@@ -18,6 +18,7 @@ from nearopt.path import StraightPath
 from nearopt.robot import PathCoefficients
 from nearopt.timing import (
     TORQUE_SAFETY,
+    BetweenSamples,
     Discretisation,
     PathQuantity,
     TimingMethod,
@@ -238,6 +239,62 @@ def random_path(robot: nearopt.Robot, rng: np.random.Generator, kind: str) -> ne
     if kind == "spline":
         return nearopt.SplinePath(at, points)
     return nearopt.BSplinePath(points)
+
+
+@pytest.mark.parametrize("name", ["two_link", "ur5", "panda"])
+def test_one_solve_holds_the_limits_between_samples(name: str, monkeypatch) -> None:
+    """The bound of the motion between the samples is part of the one solve: on seeded lines,
+    splines and B-splines (time and torque costs, with and without acceleration limits) the first
+    solve already keeps it, up to the 1e-7 of a limit by which its rows may be left out (the
+    check's uniform slow-down; up to 1e-5 for a damped torque, held at the points only), so
+    optimal_timing solves once (with damping: most often); and it holds fewer rows than the bound
+    has sums (most are implied by the segments' own samples)."""
+    import nearopt.timing.driver as driver
+
+    calls = []
+    real = driver.solve_timing
+
+    def counted(*args, **kwargs):  # noqa: ANN002, ANN003, ANN202
+        calls.append(1)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(driver, "solve_timing", counted)
+    robot = load(name)
+    rng = np.random.default_rng([7, ROBOT_NAMES.index(name)])
+    timed, solves = 0, []
+    for k in range(12):
+        arm = robot.with_limits(acceleration=20.0) if k % 4 == 3 else robot
+        path = random_path(robot, rng, ("straight", "spline", "bspline")[k % 3])
+        cost = (TimeCost(), PAPER_COST)[(k // 3) % 2]
+        grid = (50, 120)[k % 2]
+        calls.clear()
+        try:
+            result = optimal_timing(arm, path, cost, grid=grid)
+        except nearopt.InfeasiblePathError:
+            continue
+        timed += 1
+        solves.append(len(calls))
+        problem = result.problem
+        disc = Discretisation(problem)
+        held = sum(block.stop - block.start for block in (
+            disc.blocks.torque_between, disc.blocks.acceleration_between,
+            disc.blocks.speed_between))
+        limited = np.isfinite(arm.limits.effort_upper).sum() + np.isfinite(
+            problem.velocity).sum()
+        assert 0 < held < 0.5 * 16 * problem.interior.points * problem.segments * limited
+        if len(calls) > 1:
+            continue
+        # what was solved once: its slow-down is the check's, and small
+        first = real(problem, cost)
+        between = BetweenSamples(arm, path, problem)
+        slack = 1e-5 if np.any(arm.damping != 0.0) else 1e-6
+        assert between.largest_alpha(first.b) >= 1.0 - slack
+        assert between.speed_scale(first.b) >= 1.0 - 1e-6
+    assert timed >= 8, timed
+    # undamped: always one solve; damped (panda's URDF: the torque is held at the points only,
+    # its √b at the nearer knot), most often one (measured 8 of 12; the others 2 to 5)
+    damped = bool(np.any(robot.damping != 0.0))
+    assert solves.count(1) >= (0.5 * timed if damped else timed), solves
 
 
 @pytest.mark.parametrize("name", ["two_link", "ur5", "panda"])

@@ -210,15 +210,15 @@ class Discretisation:
             polygon = (seg_rows, self.coef_left[sample_rows], self.coef_right[sample_rows],
                        self.offset[sample_rows], self.lower[sample_rows],
                        self.upper[sample_rows], np.concatenate([[0.0], self.z_cap, [0.0]]))
-            kinds = [(p.torque, inside.torque),
-                     (p.acceleration, inside.acceleration) if p.acceleration is not None else None,
-                     "speed"]
-            for kind in kinds:
-                if kind is not None:
-                    rows = (self._speed_between(polygon) if kind == "speed"
-                            else self._between(*kind, polygon))
-                    for part in rows:
-                        self._append(part)
+            blocks = [
+                lambda: self._between(p.torque, inside.torque, polygon),
+                lambda: ([] if p.acceleration is None
+                         else self._between(p.acceleration, inside.acceleration, polygon)),
+                lambda: self._speed_between(polygon),
+            ]
+            for block in blocks:
+                for part in block():
+                    self._append(part)
                 starts.append(self.offset.size)
         else:
             starts += [end] * 3
@@ -272,8 +272,7 @@ class Discretisation:
         else:
             chosen = np.arange(inside.segment.size)
         rows = self._inside(quantity, coef, limited, chosen)
-        left, cl, cr, sd, sn, off, lo, up = rows[:8]
-        order = np.argsort(left, kind="stable")
+        order = np.argsort(rows[0], kind="stable")  # by segment
         rows = tuple(x[order] for x in rows)
         left, cl, cr, sd, sn, off, lo, up = rows[:8]
         need_up, need_lo = needed_inside(
