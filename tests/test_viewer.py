@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import ipaddress
 import socket
+import time
 from pathlib import Path
 
 import numpy as np
@@ -69,6 +70,23 @@ def _open(page: object, url: str, geometries: int) -> None:
     page.goto(url)
     page.wait_for_function(f"() => ({COUNT_MESHES})() >= {geometries}", timeout=60_000)
     page.wait_for_timeout(500)
+
+
+def _settled_picture(page: object, path: Path, timeout: float = 20.0) -> np.ndarray:
+    """A screenshot once the picture has stopped changing: two in a row, 250 ms apart, that
+    differ in no pixel by more than 25 of 255 (the meshes' count can be reached before every
+    one has its placement and material, and a loaded machine draws late)."""
+    page.screenshot(path=path)
+    last = _pixels(path)
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        page.wait_for_timeout(250)
+        page.screenshot(path=path)
+        now = _pixels(path)
+        if not np.any(np.abs(now - last) > 25):
+            return now
+        last = now
+    return last
 
 
 @pytest.mark.parametrize("name", ["two_link", "panda"])
@@ -224,8 +242,7 @@ def test_live_and_offline_pages_look_the_same(
         for url in (html.resolve().as_uri(), viewer.url):
             page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
             _open(page, url, geometries)
-            page.screenshot(path=tmp_path / "shot.png")
-            pictures.append(_pixels(tmp_path / "shot.png"))
+            pictures.append(_settled_picture(page, tmp_path / "shot.png"))
         browser.close()
     differ = np.any(np.abs(pictures[0] - pictures[1]) > 25, axis=2)
     assert differ.mean() < 0.005, differ.mean()
