@@ -430,6 +430,16 @@ def _clip(xs, ys, count, a, b, c, out_x, out_y):  # pragma: no cover - compiled
 
 
 @_jit()
+def _cut(xs, ys, count, a, b, c, tx, ty):  # pragma: no cover - compiled
+    """:func:`_clip` in place: the polygon (xs, ys) cut by a x + b y + c ≤ 0 (tx, ty scratch)."""
+    count = _clip(xs, ys, count, a, b, c, tx, ty)
+    for v in range(count):
+        xs[v] = tx[v]
+        ys[v] = ty[v]
+    return count
+
+
+@_jit()
 def needed_inside(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b,
                   seg_inside, in_cl, in_cr, in_off, in_d, in_w, in_lo, in_up,
                   slack):  # pragma: no cover - compiled
@@ -457,6 +467,8 @@ def needed_inside(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b,
     tx = np.empty(size)
     ty = np.empty(size)
     for k in range(big_n):
+        if seg_inside[k] == seg_inside[k + 1]:
+            continue  # no row inside this segment (those next to the rest ends: two segments)
         count = _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack,
                          xs, ys, tx, ty)
         if count <= 0:
@@ -509,13 +521,10 @@ def _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack,
             if not np.isfinite(bound):
                 continue
             loose = slack * (size_r + abs(bound))
-            count = _clip(xs, ys, count, sign * row_cl[r], sign * row_cr[r],
-                          sign * (row_off[r] - bound) - loose, tx, ty)
+            count = _cut(xs, ys, count, sign * row_cl[r], sign * row_cr[r],
+                         sign * (row_off[r] - bound) - loose, tx, ty)
             if count <= 0:
                 return count  # empty, or not a polygon any more (−1): no use either way
-            for v in range(count):
-                xs[v] = tx[v]
-                ys[v] = ty[v]
     return count
 
 
@@ -664,13 +673,10 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
                         continue
                     bound = up[j] if sign > 0.0 else lo[j]
                     loose = slack * (size_q + abs(bound))
-                    count = _clip(xs, ys, count, sign * c_cl[c], sign * c_cr[c],
-                                  sign * (c_off[c] - bound) - loose, tx, ty)
+                    count = _cut(xs, ys, count, sign * c_cl[c], sign * c_cr[c],
+                                 sign * (c_off[c] - bound) - loose, tx, ty)
                     if count <= 0:
                         break
-                    for v in range(count):
-                        xs[v] = tx[v]
-                        ys[v] = ty[v]
                 if count <= 0:
                     break
             if count > 0:

@@ -77,8 +77,7 @@ class BetweenSamples:
             self.coefs.append(inside.acceleration)
         self.problem = problem
         order = np.argsort(self.sigma)  # gravity between the knots too
-        g = self.coefs[0].g
-        check_gravity(problem, g[order], self.sigma[order], self.theta[order])
+        check_gravity(problem, self.coefs[0].g[order], self.sigma[order], self.theta[order])
 
     def _along(
         self, first: NDArray[np.float64], inner: NDArray[np.float64], last: NDArray[np.float64]
@@ -100,16 +99,10 @@ class BetweenSamples:
             np.minimum(v[:, :-1], v[:, 1:]) - margin,
         )
 
-    @staticmethod
-    def _affine(
-        coef: PathCoefficients, acc: NDArray[np.float64], b: NDArray[np.float64], alpha: float
-    ) -> NDArray[np.float64]:
-        """q = g + α(m a + c b) + √α d √b: the quantity for the profile αb."""
-        return coef.g + alpha * (coef.m * acc + coef.c * b) + np.sqrt(alpha) * coef.d * np.sqrt(b)
-
-    def excess(self, b: NDArray[np.float64], alpha: float = 1.0) -> list[NDArray[np.float64]]:
-        """For every quantity of ``problem.quantities``, its worst excess beyond the limits
-        imposed at the samples in every segment for αb, per joint, shape (N, n) [its unit]."""
+    def _terms(self, b: NDArray[np.float64]) -> list[tuple[list, list]]:
+        """For every quantity of ``problem.quantities``, q = G + W α + D √α for the profile αb:
+        (G, W, D) at the start, the points inside and the end of every segment, each
+        (N, P + 2, n), and (G, W, D) at the points next to the rest ends."""
         p = self.problem
         acc = (np.diff(b) / (2.0 * self.ds))[:, None]
         acc_pts = acc[self.seg]
@@ -117,29 +110,32 @@ class BetweenSamples:
         inner = p.segments * self.points
         out = []
         for quantity, coef in zip(p.quantities, self.coefs, strict=True):
-            lower, upper = safe_limits(quantity)
             knots = quantity.coef
-            first = self._affine(_rows(knots, slice(0, -1)), acc, b[:-1, None], alpha)
-            last = self._affine(_rows(knots, slice(1, None)), acc, b[1:, None], alpha)
-            value = self._affine(coef, acc_pts, b_pts, alpha)
-            hi, lo = self._envelope(self._along(first, value, last))
-            worst = np.max(np.maximum(hi - upper, lower - lo), axis=1)
-            near = value[inner:]
-            np.maximum.at(worst, self.seg[inner:], np.maximum(near - upper, lower - near))
-            out.append(worst)
+            parts = [
+                (k.g, k.m * a + k.c * bb, k.d * np.sqrt(bb))
+                for k, a, bb in ((_rows(knots, slice(0, -1)), acc, b[:-1, None]),
+                                 (coef, acc_pts, b_pts),
+                                 (_rows(knots, slice(1, None)), acc, b[1:, None]))
+            ]
+            along = [self._along(*(part[t] for part in parts)) for t in range(3)]
+            out.append((along, [part[inner:] for part in parts[1]]))
         return out
 
-    def relative_excess(self, b: NDArray[np.float64], alpha: float = 1.0) -> float:
-        """The largest excess of any quantity, relative to its limits (≤ 0: within them)."""
-        worst = -np.inf
-        for quantity, excess in zip(self.problem.quantities, self.excess(b, alpha), strict=True):
-            scale = np.maximum(np.abs(quantity.lower), np.abs(quantity.upper))
-            finite = np.isfinite(scale)  # a joint without this limit: never in excess
-            relative = np.full(np.shape(excess), -1.0)
-            np.divide(excess, np.where(scale > 0, scale, 1.0), out=relative,
-                      where=np.broadcast_to(finite, np.shape(excess)))
-            worst = max(worst, float(np.max(relative)))
-        return worst
+    def excess(self, b: NDArray[np.float64], alpha: float = 1.0) -> list[NDArray[np.float64]]:
+        """For every quantity of ``problem.quantities``, its worst excess beyond the limits
+        imposed at the samples in every segment for αb, per joint, shape (N, n) [its unit]."""
+        out = []
+        root = np.sqrt(alpha)
+        for quantity, (along, near) in zip(self.problem.quantities, self._terms(b),
+                                           strict=True):
+            lower, upper = safe_limits(quantity)
+            hi, lo = self._envelope(along[0] + alpha * along[1] + root * along[2])
+            worst = np.max(np.maximum(hi - upper, lower - lo), axis=1)
+            value = near[0] + alpha * near[1] + root * near[2]
+            np.maximum.at(worst, self.seg[self.problem.segments * self.points:],
+                          np.maximum(value - upper, lower - value))
+            out.append(worst)
+        return out
 
     def scale_into_limits(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
         """b scaled by the largest α ≤ 1 that keeps every quantity within its limits everywhere.
@@ -155,25 +151,12 @@ class BetweenSamples:
     def largest_alpha(self, b: NDArray[np.float64]) -> float:
         """The largest α ∈ [0, 1] with every quantity of αb within its limits (see
         :meth:`scale_into_limits`; the same bound as :meth:`excess`)."""
-        p = self.problem
-        acc = (np.diff(b) / (2.0 * self.ds))[:, None]
-        acc_pts = acc[self.seg]
-        b_pts = (b[self.seg] + self.where * (b[self.seg + 1] - b[self.seg]))[:, None]
-        inner = p.segments * self.points
         alpha = 1.0
-        for quantity, coef in zip(p.quantities, self.coefs, strict=True):
+        for quantity, (terms, near) in zip(self.problem.quantities, self._terms(b),
+                                           strict=True):
             lower, upper = safe_limits(quantity)
-            knots = quantity.coef
-            parts = [  # G, W, D of q = G + W α + D √α at the start, inside, the end
-                (k.g, k.m * a + k.c * bb, k.d * np.sqrt(bb))
-                for k, a, bb in ((_rows(knots, slice(0, -1)), acc, b[:-1, None]),
-                                 (coef, acc_pts, b_pts),
-                                 (_rows(knots, slice(1, None)), acc, b[1:, None]))
-            ]
-            terms = [self._along(*(part[t] for part in parts)) for t in range(3)]
             hi, lo = self._envelope(terms[0] + terms[1] + terms[2])  # at α = 1
             damped = bool(np.any(terms[2] != 0.0))
-            near = [part[inner:] for part in parts[1]]
             for sign, limit, bound in ((1.0, upper, hi), (-1.0, lower, lo)):
                 finite = np.isfinite(limit)
                 # a sum G + W α within its limit at α = 0 (gravity) and at 1 is so in between;
