@@ -593,3 +593,35 @@ def test_heavy_damping_is_timed_in_one_solve() -> None:
             assert damping > 1.0  # re-linearising a large damping torque fails
             continue
         assert ours.objective <= reference.objective * (1.0 + 1e-9)
+
+
+def test_speed_lines_stay_under_the_speed_bound() -> None:
+    """The lines of speed_lines keep b Ĝ ≤ 1 on the whole interval for any line Ĝ ≥ 0 (steep,
+    flat, touching 0), lose at most (ΔG/Ĝ)² of 1/Ĝ at their worse end, and the largest product
+    of the check is the dense maximum."""
+    from nearopt.timing.between import _largest_product, speed_lines
+
+    rng = np.random.default_rng(3)
+    g0 = rng.uniform(0.0, 10.0, 4000) * rng.choice([0.0, 1.0], 4000, p=[0.05, 0.95])
+    g1 = g0 * np.exp(rng.normal(scale=rng.choice([0.01, 0.3, 3.0], 4000)))
+    g1[:50] = 0.0
+    start, end = speed_lines(g0, g1)
+    t = np.linspace(0.0, 1.0, 2001)[:, None]
+    moving = (g0 > 0) | (g1 > 0)
+    assert np.all(np.isinf(start[~moving])) and np.all(start[moving] >= 0.0)
+    g0, g1, start, end = g0[moving], g1[moving], start[moving], end[moving]
+    line = start + (end - start) * t
+    bound = g0 + (g1 - g0) * t
+    assert np.all(line * bound <= 1.0 + 1e-12)
+    # tight where Ĝ changes little: off by at most (ΔG/Ĝ)² at the worse end
+    small = np.abs(g1 - g0) < 0.05 * np.minimum(g0, g1)
+    change = np.abs(g1 - g0)[small] / np.minimum(g0, g1)[small]
+    worst = np.minimum(start[small] * g0[small], end[small] * g1[small])
+    assert np.all(worst >= 1.0 - change**2 - 1e-12)
+    # the check's bound: the maximum of the product of two lines
+    x0, dx = rng.uniform(0.0, 2.0, g0.size), rng.normal(size=g0.size)
+    dense = np.max((x0 + dx * t) * (g0 + (g1 - g0) * t), axis=0)
+    exact = _largest_product(x0, dx, g0, g1 - g0)
+    assert np.all(exact >= dense - 1e-12)  # no sample above it
+    # and none far below: the samples' spacing 1/2000 misses at most |x'g'| / 2000² / 4
+    assert np.all(exact - dense <= np.abs(dx * (g1 - g0)) / 1.6e7 + 1e-12)

@@ -29,7 +29,8 @@ if TYPE_CHECKING:
     from ..robot import Robot
     from .problem import TimingProblem
 
-__all__ = ["BetweenSamples", "uniform_slow_down", "tighten", "inherit_margins"]
+__all__ = ["BetweenSamples", "uniform_slow_down", "tighten", "inherit_margins", "speed_envelope",
+           "speed_lines"]
 
 
 class BetweenSamples:
@@ -48,11 +49,13 @@ class BetweenSamples:
     points by as much as it does from one point to the next (a peak of f'' between two points
     is then covered; without that term the bound fell short by 3 % of the bulge on a curved
     speed profile). The limits checked are those imposed at the samples (the safety margin
-    included). Stage 1 imposes this bound itself (rows of the two knots of every segment, see
-    :class:`~nearopt.timing.Discretisation`), so that one solve mostly keeps it. Next to the rest
-    ends the quantities are also evaluated at points geometrically closer to σ = 0 and 1 (at rest
-    b ∝ σ, so a damping torque
-    d√b rises like √σ).
+    included). A joint speed θ̇_i² = b θ'_i² is bounded on each interval by the product of b
+    (linear there) and the line above θ'_i² that this bound gives (:func:`speed_envelope`),
+    whose maximum is found in closed form. Stage 1 imposes these bounds itself (rows of the two
+    knots of every segment, see :class:`~nearopt.timing.Discretisation`), so that one solve
+    mostly keeps them. Next to the rest ends the quantities are also evaluated at points
+    geometrically closer to σ = 0 and 1 (at rest b ∝ σ, so a damping torque d√b rises like
+    √σ).
     """
 
     def __init__(self, robot: Robot, path: Path, problem: TimingProblem,
@@ -76,6 +79,7 @@ class BetweenSamples:
         if problem.acceleration is not None:
             self.coefs.append(inside.acceleration)
         self.problem = problem
+        self._slope_lines: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None
         order = np.argsort(self.sigma)  # gravity between the knots too
         check_gravity(problem, self.coefs[0].g[order], self.sigma[order], self.theta[order])
 
@@ -162,21 +166,29 @@ class BetweenSamples:
                 # a sum G + W α within its limit at α = 0 (gravity) and at 1 is so in between;
                 # with damping (+ D √α) it may leave it in between: then every interval counts
                 over = finite & (damped | (sign * bound > sign * limit))
-                g, w, d = _envelope_sums(terms, over)
-                joint = np.nonzero(over)[2]
-                alpha = min(alpha, _first_crossing(sign * w, sign * d, sign * (g - limit[joint])))
+                if np.any(over):
+                    g, w, d = _envelope_sums(terms, over)
+                    joint = np.nonzero(over)[2]
+                    alpha = min(alpha, _first_crossing(sign * w, sign * d,
+                                                       sign * (g - limit[joint])))
                 g, w, d = (x[:, finite] for x in near)
                 alpha = min(alpha, _first_crossing(sign * w, sign * d,
                                                    sign * (g - limit[finite])))
         return alpha
 
     def _speed_squared(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
-        """Upper bounds of θ̇_i² = b θ'_i² on each interval between points, (N, P + 1, n)."""
-        p = self.problem
+        """Upper bounds of θ̇_i² = b θ'_i² on each interval between points, (N, P + 1, n): the
+        largest product of b (linear there) and the line above θ'_i² of :func:`speed_envelope`
+        (a quadratic in the interval's coordinate, its maximum in closed form)."""
+        if self._slope_lines is None:
+            p = self.problem
+            self._slope_lines = speed_envelope(self._along(p.dtheta[:-1], self.dtheta,
+                                                           p.dtheta[1:]))
+        g0, g1 = self._slope_lines
         frac = np.arange(self.points + 2) / (self.points + 1)
         b_pts = b[:-1, None] + frac[None, :] * (b[1:] - b[:-1])[:, None]
-        slope = self._along(p.dtheta[:-1], self.dtheta, p.dtheta[1:])
-        return self._envelope(b_pts[:, :, None] * slope**2)[0]
+        x0, x1 = b_pts[:, :-1, None], b_pts[:, 1:, None]
+        return _largest_product(x0, x1 - x0, g0, g1 - g0)
 
     def speed_excess(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
         """The factor (≤ 1 where a joint speed may exceed its limit) by which b must shrink in
@@ -206,6 +218,68 @@ def _curvature(v: NDArray[np.float64]) -> NDArray[np.float64]:
     first = 2.0 * curvature[:, :1] - curvature[:, 1:2]
     last = 2.0 * curvature[:, -1:] - curvature[:, -2:-1]
     return np.concatenate([first, curvature, last], axis=1)
+
+
+def speed_envelope(
+    slope: NDArray[np.float64],
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Lines above θ'_i² on each interval between the points of a segment.
+
+    ``slope`` holds θ'_i at the start, the points inside and the end of every segment,
+    (N, P + 2, n). On the interval between points j and j + 1, θ'_i² lies below its chord plus
+    the margin e_j = (max(|κ_j|, |κ_{j+1}|) + |κ_{j+1} − κ_j|) / 8 of
+    :meth:`BetweenSamples._envelope` (κ its second differences), i.e. below the line from
+    G0 = θ'_i(j)² + e_j to G1 = θ'_i(j+1)² + e_j. Returns (G0, G1), each (N, P + 1, n).
+    """
+    g = slope**2
+    curvature = _curvature(g)
+    change = np.abs(np.diff(curvature, axis=1))
+    curvature = np.abs(curvature)
+    margin = (np.maximum(curvature[:, :-1], curvature[:, 1:]) + change) / 8.0
+    return g[:, :-1] + margin, g[:, 1:] + margin
+
+
+def speed_lines(
+    g0: NDArray[np.float64], g1: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Bounds (B0, B1) on b at both ends of an interval such that b, linear between them,
+    keeps b Ĝ ≤ 1 on the whole interval, Ĝ the line from g0 to g1 (≥ 0; any shape).
+
+    1/Ĝ is convex, so each of its tangents lies below it: b under a tangent at both ends is
+    under 1/Ĝ in between. Of the tangents at the middle (off by (ΔG/Ĝ)²/4 of 1/Ĝ at both ends)
+    and at the end where Ĝ is larger (exact there, off by (ΔG/Ĝ)² at the other end, never
+    below 0), the one off by less at its worse end. Where Ĝ = 0 at both ends: inf (no bound).
+    A speed limit v with the line above θ'² of :func:`speed_envelope` gives b ≤ v² B."""
+    dg = g1 - g0
+    best = (np.full(g0.shape, np.inf), np.full(g0.shape, np.inf))
+    best_ratio = np.full(g0.shape, -np.inf)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        for at in (np.full(g0.shape, 0.5), np.where(dg >= 0.0, 1.0, 0.0)):
+            g_at = g0 + at * dg
+            slope = -dg / g_at**2  # d(1/Ĝ)/dt there
+            ends = (1.0 / g_at - at * slope, 1.0 / g_at + (1.0 - at) * slope)
+            # how much of 1/Ĝ each end keeps (1 where Ĝ = 0 there: no bound needed)
+            ratio = np.minimum(np.where(g0 > 0.0, ends[0] * g0, 1.0),
+                               np.where(g1 > 0.0, ends[1] * g1, 1.0))
+            better = (g_at > 0.0) & (ratio > best_ratio)
+            best = tuple(np.where(better, e, old) for e, old in zip(ends, best, strict=True))
+            best_ratio = np.where(better, ratio, best_ratio)
+    return best
+
+
+def _largest_product(
+    x0: NDArray[np.float64], dx: NDArray[np.float64], g0: NDArray[np.float64],
+    dg: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """max over t ∈ [0, 1] of (x0 + dx t)(g0 + dg t), elementwise."""
+    a2 = dx * dg
+    a1 = x0 * dg + g0 * dx
+    ends = np.maximum(x0 * g0, (x0 + dx) * (g0 + dg))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = np.where(a2 < 0.0, -a1 / (2.0 * a2), -1.0)
+    inside = (t > 0.0) & (t < 1.0)
+    peak = x0 * g0 + a1 * t + a2 * t * t
+    return np.where(inside, np.maximum(ends, peak), ends)
 
 
 def _envelope_sums(

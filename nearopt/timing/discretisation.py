@@ -16,17 +16,21 @@ in blocks (:class:`RowBlocks`):
 * acceleration: θ̈_{r,i} = θ'_i a_seg + θ''_i b_node, likewise, for joints with a limit;
 * speed: b_k θ'_i(σ_k)² ≤ v_i² at every free knot, one row per joint that moves and has a limit;
 * interior speed: ((1 − w) b_k + w b_{k+1}) θ'_i(σ_p)² ≤ v_i² at points inside segments, where the
-  knots' own rows do not imply it;
+  knots' own rows do not imply it (for the solver only on a problem without points between the
+  samples; stage 2's model keeps them);
 * between the samples (blocks ``torque_between``, ``acceleration_between``, ``speed_between``):
-  the bound of :class:`~nearopt.timing.BetweenSamples` on every interval between the points of
-  ``problem.interior`` (b = (1 − w) b_k + w b_{k+1} and a = a_k there, so the values and their
-  second differences are rows of the segment's two knots): the sums q_i ± κ_l/8 ± Δκ/8 of
-  :func:`~nearopt.timing._kernels.envelope_rows`, for the joints with a limit, on the sides that
-  the segment's samples do not imply (most are: each segment's polygon of (b_k, b_{k+1}) is
-  clipped in 2-D); for a damped quantity, its values at those points instead (the damping's √b
-  at the nearer knot, exact in the first and the last segment, where one knot is at rest), and
-  always its values at the points next to the rest ends. So one solve holds the limits between
-  the samples too.
+  for torques and accelerations, the bound of :class:`~nearopt.timing.BetweenSamples` on every
+  interval between the points of ``problem.interior`` (b = (1 − w) b_k + w b_{k+1} and a = a_k
+  there, so the values and their second differences are rows of the segment's two knots): the
+  sums q_i ± κ_l/8 ± Δκ/8 of :func:`~nearopt.timing._kernels.envelope_rows`, for the joints with
+  a limit, on the sides that the segment's samples do not imply (most are: each segment's
+  polygon of (b_k, b_{k+1}) is clipped in 2-D); for a damped quantity, its values at those points
+  instead (the damping's √b at the nearer knot, exact in the first and the last segment, where
+  one knot is at rest), and always its values at the points next to the rest ends. For the joint
+  speeds, one row per point b(w) ≤ min_i v_i² B_i (the tangent lines of
+  :func:`~nearopt.timing.between.speed_lines` below v_i² / θ'_i², with the bound at the knots
+  folded into ``z_cap``): b and the bound are linear between two points, so they hold for all σ,
+  whatever the number of joints. So one solve holds the limits between the samples too.
 
 Every row couples at most two neighbouring knots (those of its segment): it is held in *pair form*,
 ``coef_left · b_left + coef_right · b_{left+1} + sqrt_coef · √b_sqrt_node + offset``, from which
@@ -169,7 +173,9 @@ class Discretisation:
     def _reduce(self) -> None:
         """For a fixed path the speed rows of different joints at one place are proportional:
         turn those at the knots into bounds on z, and inside segments keep the tightest row of
-        each point unless the knots' bounds imply it (b inside is a convex combination)."""
+        each point unless the knots' bounds imply it (b inside is a convex combination), or
+        none if the problem has its points between the samples (``speed_between`` holds the
+        speeds everywhere)."""
         knots = self.blocks.speed
         cap = self.z_upper.copy()
         with np.errstate(divide="ignore"):
@@ -179,7 +185,9 @@ class Discretisation:
             self.z_cap = cap
             inside = np.arange(self.blocks.interior_speed.start, self.blocks.interior_speed.stop)
             keep = np.ones(inside.size, dtype=bool)
-            if inside.size:
+            if self.problem.interior is not None:  # the rows between the samples imply them
+                keep[:] = False
+            elif inside.size:
                 scale = np.abs(self.coef_left[inside]) + np.abs(self.coef_right[inside])  # θ'_i²
                 bound = self.upper[inside] / scale
                 order = np.lexsort((bound, self.location[inside]))
@@ -202,6 +210,7 @@ class Discretisation:
         self.position = np.full(end, np.nan)
         starts = [end]
         if inside is not None:
+            speed = self._speed_between()  # first: it tightens the caps of the knots
             # the samples' undamped rows, by segment: the polygon each segment's samples allow
             sample_rows = np.arange(self.blocks.acceleration.stop)
             sample_rows = sample_rows[self.sqrt_coef[sample_rows] == 0.0]
@@ -214,7 +223,7 @@ class Discretisation:
                 lambda: self._between(p.torque, inside.torque, polygon),
                 lambda: ([] if p.acceleration is None
                          else self._between(p.acceleration, inside.acceleration, polygon)),
-                lambda: self._speed_between(polygon),
+                lambda: speed,
             ]
             for block in blocks:
                 for part in block():
@@ -287,10 +296,13 @@ class Discretisation:
         out.append(tuple(x[keep] for x in rows))
         return out
 
-    def _speed_between(self, polygon: tuple) -> list[tuple]:
-        """The envelope rows of the joint speeds² b θ'_i² between the samples (the bound of
-        :meth:`~nearopt.timing.BetweenSamples.speed_excess`)."""
-        from ._kernels import envelope_rows
+    def _speed_between(self) -> list[tuple]:
+        """Rows that keep every joint speed within its limit for all σ: b ≤ v_i² B at the points
+        of ``problem.interior`` by the lines of :func:`~nearopt.timing.between.speed_lines`
+        (b and the bound are both linear between two points, so it holds in between), as rows
+        b(w) c ≤ v_j² (c = v_j² / bound, j the joint that sets it) where the knots' caps do not
+        imply them; at the knots, caps on z (``z_cap`` tightened)."""
+        from .between import speed_envelope, speed_lines
 
         p = self.problem
         inside = p.interior
@@ -298,15 +310,31 @@ class Discretisation:
         if limited.size == 0:
             return []
         big_n, points = p.segments, inside.points
-        w = np.concatenate([[0.0], inside.weight[:points], [1.0]])[None, :, None]
-        slope2 = self._along(p.dtheta, inside.dtheta[: big_n * points], limited) ** 2
-        upper = p.velocity[limited] ** 2 * (1.0 - 2.0 * SPEED_SAFETY)
-        seg, point, joint, cl, cr, off, lo, up = envelope_rows(
-            *polygon, np.ascontiguousarray((1.0 - w) * slope2), np.ascontiguousarray(w * slope2),
-            np.zeros(slope2.shape), np.full(limited.size, -np.inf), upper, 1e-9, TOUCH, MERGE)
-        zero = np.zeros(seg.size)
-        return [(seg, cl, cr, zero, seg.copy(), off, lo, up, limited[joint], seg.copy(),
-                 w.ravel()[point])]
+        starts, ends = speed_lines(*speed_envelope(
+            self._along(p.dtheta, inside.dtheta[: big_n * points], limited)))
+        v2 = p.velocity[limited] ** 2 * (1.0 - 2.0 * SPEED_SAFETY)
+        # every point's bound: the smallest over the joints and the two intervals meeting there
+        pad = np.full((big_n, 1, limited.size), np.inf)
+        both = np.concatenate([np.concatenate([v2 * starts, pad], axis=1),
+                               np.concatenate([pad, v2 * ends], axis=1)], axis=2)
+        pick = np.argmin(both, axis=2)  # (N, P + 2)
+        bound = np.take_along_axis(both, pick[:, :, None], axis=2)[:, :, 0]
+        joint = pick % limited.size
+        knot_bound = np.full(big_n + 1, np.inf)
+        np.minimum.at(knot_bound, np.arange(big_n), bound[:, 0])
+        np.minimum.at(knot_bound, np.arange(1, big_n + 1), bound[:, -1])
+        self.z_cap = np.minimum(self.z_cap, knot_bound[1:-1])
+        cap = np.concatenate([[0.0], self.z_cap, [0.0]])
+        w = np.arange(1, points + 1) / (points + 1)
+        inner = bound[:, 1:-1]
+        keep = inner < (1.0 - w) * cap[:-1, None] + w * cap[1:, None]
+        seg, point = np.nonzero(keep)
+        limit = v2[joint[:, 1:-1][keep]]
+        scale = limit / inner[keep]
+        count = seg.size
+        return [(seg, (1.0 - w[point]) * scale, w[point] * scale, np.zeros(count), seg.copy(),
+                 np.zeros(count), np.full(count, -np.inf), limit,
+                 limited[joint[:, 1:-1][keep]], seg.copy(), w[point])]
 
     def _along(self, at_knots: NDArray[np.float64], inside: NDArray[np.float64],
                joints: NDArray[np.int64]) -> NDArray[np.float64]:
