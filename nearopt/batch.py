@@ -4,9 +4,10 @@ A request is one motion of ``nearopt plan``: an ``id`` and the long options of t
 without their dashes, ``-`` written ``_`` (``{"id": "m1", "robot": "ur5", "q0": [...], "qe":
 [...], "beta": 0.001}``; ``"time_optimal": true``; ``"via": [[...], [...]]``; ``"scene":
 "cell.toml"``, ``"task": "pick.toml"``, ``"goal_pose": [x, y, z, qx, qy, qz, qw]``). Each is
-parsed by the same parser, planned and verified by the same code as ``nearopt plan``; the motion
-comes back as the JSON document ``nearopt plan --json`` writes (with the ``id``, the request and
-a ``"batch"`` record added).
+read into the same :class:`~nearopt.api.PlanRequest` as ``nearopt plan`` makes of its options,
+then planned and verified by the same code (:func:`nearopt.api.run`); the motion comes back
+as the JSON document ``nearopt plan --json`` writes (with the ``id``, the request and a
+``"batch"`` record added).
 
 Where the motions run is a :class:`Pool`: :class:`LocalPool` (one process per core of this
 machine, :mod:`concurrent.futures`; a worker that dies is replaced and its motions re-run) or
@@ -41,6 +42,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from .api import PlanRequest, run
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .outputs import make_folder, resolve_output, write_atomically, write_outputs
 
@@ -64,8 +66,6 @@ __all__ = [
 
 PATH_OPTIONS = ("urdf", "srdf", "scene", "task")
 """Options naming files: relative paths are read from the requests file's folder."""
-OUTPUT_OPTIONS = ("json", "csv", "html", "plots", "show")
-"""Options of ``nearopt plan`` a request cannot have: the batch writes the outputs."""
 SUMMARY_FIELDS = ("id", "status", "J", "te", "iterations", "wall_time", "error")
 """The columns of ``summary.csv``."""
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
@@ -115,46 +115,17 @@ class MotionRequest:
                 options[key] = str((base / Path(options[key]).expanduser()).resolve())
         return cls(motion_id, options)
 
-    def argv(self) -> list[str]:
-        """The request as ``nearopt plan`` arguments.
+    def plan_request(self, rate: float = 1000.0) -> PlanRequest:
+        """The motion as a :class:`~nearopt.api.PlanRequest`, at the batch's ``rate`` [Hz]
+        unless it sets its own.
 
         Raises
         ------
         ConfigurationError
-            An output option, or a value that is not a JSON scalar, list or list of lists.
+            An unknown or output option, or a value of the wrong kind.
         """
-        from .cli import plan_options, repeatable_options
-
-        known, repeatable = plan_options(), repeatable_options()
-        argv = ["plan", "--quiet"]
-        for key, value in self.options.items():
-            if key in OUTPUT_OPTIONS and value not in (False, None):
-                raise ConfigurationError(
-                    f"option {key!r}: a batch writes every motion as DIR/<id>.json itself"
-                )
-            if key not in known:
-                raise ConfigurationError(
-                    f"unknown option {key!r} (the options of `nearopt plan` without dashes, "
-                    f"'-' as '_': {', '.join(k for k in known if k not in OUTPUT_OPTIONS)})"
-                )
-            flag = "--" + key.replace("_", "-")
-            if value is True:
-                argv.append(flag)
-            elif value is False or value is None:
-                continue
-            elif key in repeatable and isinstance(value, list):
-                if not all(isinstance(v, list) for v in value):
-                    raise ConfigurationError(
-                        f"option {key!r} is a list of lists (one per {key} point), got "
-                        f"{value!r:.60}"
-                    )
-                for item in value:  # a repeated option (via)
-                    argv += [flag, *map(_scalar, item)]
-            elif isinstance(value, list):
-                argv += [flag, *map(_scalar, value)] if value else [flag]
-            else:
-                argv += [flag, _scalar(value)]
-        return argv
+        request = PlanRequest.from_mapping(self.options)
+        return request if "rate" in self.options else request.with_rate(rate)
 
     def fingerprint(self, rate: float = 1000.0) -> str:
         """The request as canonical JSON, with the SHA-256 of every file it names and the
@@ -178,14 +149,6 @@ def _plain(value: object) -> object:
     if isinstance(value, tuple | list):
         return [_plain(v) for v in value]
     return value
-
-
-def _scalar(value: object) -> str:
-    if isinstance(value, bool) or not isinstance(value, str | int | float):
-        raise ConfigurationError(
-            f"option values are numbers, strings, or lists of them; got {value!r:.60}"
-        )
-    return repr(value) if isinstance(value, float) else str(value)
 
 
 class OutcomeStatus(StrEnum):
@@ -263,29 +226,20 @@ def plan_request(request: MotionRequest, rate: float = 1000.0,
     Every error a motion can cause (a bad option, an infeasible request, a failed verification)
     is its outcome's ``error``, not an exception.
     """
-    from . import cli
-    from .export import check_sampling, json_text
+    from .export import json_text
 
     t0 = time.perf_counter()
     try:
-        argv = request.argv()
-        if "rate" not in request.options:  # the batch's rate, unless the motion sets its own
-            argv += ["--rate", repr(float(rate))]
-        args = cli.parse_plan(argv)
-        prepared = cli.prepare(args, robot_loader=_cached_robot)
-        result = cli.solve(prepared, args)
-        cli.check(result, prepared, args).raise_if_failed()
+        outcome = run(request.plan_request(rate), robot_loader=_cached_robot)
+        result = outcome.result
         segments = getattr(result, "segments", None)
         iterations = (sum(len(s.history) - 1 for s in segments) if segments is not None
                       else len(result.history) - 1)
         wall = time.perf_counter() - t0
-        with warnings.catch_warnings(record=True) as caught:  # kept with the motion
-            warnings.simplefilter("always", SamplingWarning)
-            check_sampling(result, args.rate)
-        notes = list(dict.fromkeys(str(w.message) for w in caught))
+        notes = list(outcome.warnings)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SamplingWarning)
-            text = json_text(result, args.rate, extra={
+            text = json_text(result, outcome.prepared.request.rate, extra={
                 "id": request.id,
                 "request": json.loads(request.fingerprint(rate)),
                 "batch": {"status": str(result.status), "iterations": iterations,

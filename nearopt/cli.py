@@ -19,36 +19,36 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import re
 import signal
 import sys
 import time
 import warnings
-from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import fields
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn
 
 import numpy as np
 
+from .api import MAX_RATE, PlanRequest, check, prepare, solve
 from .catalog import available_robots
-from .collision import Scene
-from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .export import csv_text, json_text
-from .kinematics import ToolPose
 from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
 from .path import StraightPath
-from .planning import METHODS, Iteration, PlanResult, StopReason, Task, TaskResult, plan, plan_task
-from .planning.task import check_targets
-from .robot import Robot
-from .verify import VerificationError, VerificationReport, verify
+from .planning import METHODS, Iteration, StopReason, TaskResult
+from .verify import VerificationError
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
 
-    from numpy.typing import NDArray
+__all__ = ["main", "parse_plan", "plan_request"]
 
-__all__ = ["main", "plan_options", "parse_plan", "prepare", "solve", "check", "Prepared"]
+# a negative number in any float syntax (-1e-05, -.5, -inf) is a value, not an option
+_NEGATIVE_NUMBER = re.compile(
+    r"^-(?:(?:\d+(?:_\d+)*)?\.?\d+(?:_\d+)*\.?(?:[eE][-+]?\d+)?|inf(?:inity)?|nan)$",
+    re.IGNORECASE,
+)
 
 
 class _Once(argparse._StoreAction):  # noqa: SLF001 - argparse's own store action
@@ -72,6 +72,7 @@ class _Parser(argparse.ArgumentParser):
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self.register("action", None, _Once)
         self.register("action", "store", _Once)
+        self._negative_number_matcher = _NEGATIVE_NUMBER  # argparse's own reads -1e-05 as -1
 
     def error(self, message: str) -> NoReturn:
         raise ConfigurationError(message)
@@ -188,160 +189,6 @@ def _parser() -> argparse.ArgumentParser:
     return parser
 
 
-def _per_joint(values: list[float], robot: Robot, option: str) -> float | list[float]:
-    """One value for every joint, or one per joint."""
-    if len(values) == 1:
-        return values[0]
-    if len(values) != robot.n:
-        raise ConfigurationError(
-            f"{option} takes one value or one per joint of {robot.name} ({robot.n}: "
-            f"{', '.join(robot.joint_names)}), got {len(values)}"
-        )
-    return values
-
-
-def _cost(args: argparse.Namespace) -> Cost:
-    if args.beta is not None:
-        return TorqueCost(args.beta)
-    if args.weights is not None:
-        return TorqueCost(weights=args.weights)
-    return TimeCost()
-
-
-MAX_SAMPLES = 10_000_000  # rate × te: beyond this a file would take gigabytes
-MAX_RATE = 1e6  # [Hz] a sampling rate above a megahertz is a mistake, not a controller
-
-
-def _check_request(args: argparse.Namespace) -> None:
-    """What can be checked before loading the robot: numbers and optional packages."""
-    if not (np.isfinite(args.rate) and 0 < args.rate <= MAX_RATE):
-        raise ConfigurationError(
-            f"--rate must be a number of Hz in (0, {MAX_RATE:.0e}], got {args.rate}"
-        )
-    if not args.time_limit > 0:
-        raise ConfigurationError(
-            f"--time-limit must be a positive number of seconds (inf: none), got {args.time_limit}"
-        )
-    for option in ("lock", "tip", "base", "lock_at"):
-        if getattr(args, option) and not args.urdf:
-            raise ConfigurationError(
-                f"--{option.replace('_', '-')} applies to --urdf (a named robot chooses its own "
-                "joints)"
-            )
-    if args.base and not args.tip:
-        raise ConfigurationError("--base needs --tip: the chain goes from the base to the tip")
-    if sum(x is not None for x in (args.qe, args.goal_pose, args.task)) != 1:
-        raise ConfigurationError(
-            "give the goal as --qe (joint values), as --goal-pose or as a --task file, once"
-        )
-    if args.task is not None and args.via:
-        raise ConfigurationError("--via applies to --qe or --goal-pose (a --task file lists its "
-                                 "targets, stop = false to pass through)")
-    if args.task is not None and args.frame:
-        raise ConfigurationError("--frame applies to --goal-pose (a --task file gives its frame)")
-    if args.task is None and args.q0 is None:
-        raise ConfigurationError("give the start configuration, --q0")
-    if args.task is not None and args.deg and args.q0 is None:
-        raise ConfigurationError("--deg applies to --q0 (a --task file gives its units: "
-                                 "units = \"deg\")")
-    if args.goal_pose is not None and len(args.goal_pose) not in (3, 7):
-        raise ConfigurationError(
-            f"--goal-pose takes x y z [m] or x y z qx qy qz qw, got {len(args.goal_pose)} numbers"
-        )
-    if args.frame and args.goal_pose is None and args.task is None:
-        raise ConfigurationError("--frame applies to --goal-pose")
-    if args.fixed_goal and args.goal_pose is None and args.task is None:
-        raise ConfigurationError("--fixed-goal applies to --goal-pose or --task")
-    if args.group and not args.urdf:
-        raise ConfigurationError("--group applies to --urdf (a named robot chooses its own joints)")
-    if args.group and not args.srdf:
-        raise ConfigurationError("--group needs --srdf: the group is read from the SRDF")
-    if args.margin is not None and not (np.isfinite(args.margin) and args.margin >= 0):
-        raise ConfigurationError(f"--margin must be a distance ≥ 0 [m], got {args.margin}")
-    if args.margin is not None and not args.scene and not args.self_collision:
-        raise ConfigurationError("--margin applies with --scene or --self-collision")
-    if args.group and args.tip:
-        raise ConfigurationError("give the arm as --tip or as an SRDF --group, not both")
-    if args.plots:
-        try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            raise ConfigurationError(
-                "--plots needs matplotlib: pip install 'nearopt[viz]'"
-            ) from None
-
-
-def _lock_values(pairs: list[str]) -> dict[str, float]:
-    """``--lock-at NAME=VALUE …`` as a dict."""
-    values = {}
-    for pair in pairs:
-        name, sep, value = pair.partition("=")
-        try:
-            values[name] = float(value)
-        except ValueError:
-            sep = ""
-        if not sep or not name:
-            raise ConfigurationError(f"--lock-at takes JOINT=VALUE pairs, got {pair!r}")
-    return values
-
-
-RobotLoader = Callable[[tuple[object, ...], Callable[[], Robot]], Robot]
-
-
-def _robot(args: argparse.Namespace, loader: RobotLoader | None = None) -> Robot:
-    """The arm, with the limits the command line overrides; ``loader(key, load)`` may return a
-    robot loaded earlier for the same key (a batch worker keeps its robots)."""
-    single_effort = (args.effort_limit[0] if args.effort_limit and len(args.effort_limit) == 1
-                     else None)
-
-    def load() -> Robot:
-        if args.robot:
-            return Robot.from_name(args.robot, **({"srdf": args.srdf} if args.srdf else {}))
-        return Robot.from_urdf(
-            args.urdf, locked_joints=tuple(args.lock), tip=args.tip, base=args.base,
-            lock_at=_lock_values(args.lock_at), srdf=args.srdf, group=args.group,
-            effort_limit=single_effort,
-        )
-
-    key = (args.robot, args.urdf, tuple(args.lock), args.tip, args.base, args.srdf, args.group,
-           tuple(args.lock_at), None if args.robot else single_effort)
-    robot = load() if loader is None else loader(key, load)
-    overrides = {}
-    for option, key in (("effort_limit", "effort"), ("velocity_limit", "velocity"),
-                        ("acceleration_limit", "acceleration")):
-        values = getattr(args, option)
-        if values is not None:
-            overrides[key] = _per_joint(values, robot, f"--{option.replace('_', '-')}")
-    if args.velocity_scale is not None:
-        if not (np.isfinite(args.velocity_scale) and args.velocity_scale > 0):
-            raise ConfigurationError(
-                f"--velocity-scale must be a positive number, got {args.velocity_scale}"
-            )
-        base = np.asarray(overrides.get("velocity", robot.limits.velocity), dtype=float)
-        overrides["velocity"] = base * args.velocity_scale
-    return robot.with_limits(**overrides) if overrides else robot
-
-
-def _plan_actions() -> list[argparse.Action]:
-    """The arguments of the ``plan`` subcommand."""
-    parser = _parser()
-    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))  # noqa: SLF001
-    return sub.choices["plan"]._actions  # noqa: SLF001
-
-
-def plan_options() -> tuple[str, ...]:
-    """The long options of ``nearopt plan`` without dashes, ``-`` as ``_`` (a batch's keys)."""
-    names = (o for a in _plan_actions() for o in a.option_strings)
-    return tuple(sorted({o[2:].replace("-", "_") for o in names if o.startswith("--")} - {"help"}))
-
-
-def repeatable_options() -> tuple[str, ...]:
-    """The options of ``nearopt plan`` given once per value (``--via``): a batch's list of
-    lists."""
-    return tuple(a.dest for a in _plan_actions()
-                 if isinstance(a, argparse._AppendAction))  # noqa: SLF001
-
-
 def parse_plan(argv: Sequence[str]) -> argparse.Namespace:
     """``nearopt plan`` arguments (``argv`` starts with ``"plan"``) as the command reads them.
 
@@ -356,104 +203,27 @@ def parse_plan(argv: Sequence[str]) -> argparse.Namespace:
     return args
 
 
-@dataclass(frozen=True)
-class Prepared:
-    """A ``nearopt plan`` request read and checked: what to plan."""
-
-    robot: Robot
-    q0: NDArray[np.float64]
-    qe: NDArray[np.float64] | ToolPose | None
-    task: Task | None
-    scene: Scene | None
-    cost: Cost
-    via: list[NDArray[np.float64]]
-
-
-def prepare(args: argparse.Namespace, robot_loader: RobotLoader | None = None) -> Prepared:
-    """Check a request and load what it names (robot, task, scene) before any planning.
-
-    Raises
-    ------
-    NearoptError
-        On anything the request gets wrong (naming the option, joint, value and limit).
-    """
-    _check_request(args)
-    robot = _robot(args, robot_loader)
-    if args.weights is not None and len(args.weights) != robot.n:
-        raise ConfigurationError(
-            f"--weights needs one weight per joint of {robot.name} ({robot.n}), "
-            f"got {len(args.weights)}"
-        )
-    task = Task.from_file(args.task) if args.task is not None else None
-    if args.q0 is not None:
-        q0 = np.deg2rad(args.q0) if args.deg else np.asarray(args.q0)
-    elif task is not None and task.start is not None:
-        q0 = np.asarray(task.start)
-    else:
-        raise ConfigurationError(f"give the start configuration: --q0, or start = [...] in "
-                                 f"{args.task}")
-    qe: NDArray[np.float64] | ToolPose | None = None
-    if args.goal_pose is not None:
-        qe = ToolPose(args.goal_pose[:3], args.goal_pose[3:] or None, args.frame)
-        robot.frame_id(args.frame)  # an unknown frame is named before any work
-    elif args.qe is not None:
-        qe = np.deg2rad(args.qe) if args.deg else np.asarray(args.qe)
-    else:  # every target is checked before any work
-        check_targets(robot, task.targets, q0, where=str(task.source))  # type: ignore[union-attr]
-    scene = Scene.from_file(args.scene) if args.scene is not None else None
-    via = [np.deg2rad(v) if args.deg else np.asarray(v) for v in args.via]
-    return Prepared(robot, q0, qe, task, scene, _cost(args), via)
-
-
-def solve(
-    prepared: Prepared, args: argparse.Namespace,
-    callback: Callable[[Iteration], None] | None = None,
-    segment_callback: Callable[[int, Iteration], None] | None = None,
-) -> PlanResult | TaskResult:
-    """Plan the request: :func:`~nearopt.plan`, or :func:`~nearopt.plan_task` for a task."""
-    common = dict(
-        method=args.method,
-        grid=args.grid,
-        max_iterations=0 if args.stage1_only else args.max_iterations,
-        time_limit=args.time_limit,
-        velocity_limits=not args.no_velocity_limits,
-        position_limits=not args.no_position_limits,
-        scene=prepared.scene,
-        margin=args.margin,
-        self_collision=args.self_collision,
-        optimise_goal=not args.fixed_goal,
-    )
-    if prepared.task is not None:
-        return plan_task(prepared.robot, prepared.q0, prepared.task, prepared.cost,
-                         callback=segment_callback, **common)  # type: ignore[arg-type]
-    return plan(prepared.robot, prepared.q0, prepared.qe, prepared.cost, callback=callback,
-                via=prepared.via, **common)  # type: ignore[arg-type]
-
-
-def check(result: PlanResult | TaskResult, prepared: Prepared,
-          args: argparse.Namespace) -> VerificationReport:
-    """Verify a plan as the command does before writing it: at the controller's rate (never
-    more coarsely than 1 kHz), its start, goal (or goal pose), targets, limits, clearance, J."""
-    if args.rate * result.duration > MAX_SAMPLES:
-        raise ConfigurationError(
-            f"--rate {args.rate:g} Hz over te = {result.duration:.4g} s gives more than "
-            f"{MAX_SAMPLES:.0e} samples"
-        )
-    qe = prepared.qe
-    if prepared.task is not None:
-        last = prepared.task.targets[-1].goal
-        qe = last if isinstance(last, ToolPose) else np.asarray(last)
-    return verify(
-        result.trajectory, prepared.robot, rate=max(args.rate, 1000.0), q0=prepared.q0,
-        qe=None if isinstance(qe, ToolPose) else qe, goal_pose=result.goal, cost=result.cost,
-        J=result.J, velocity_limits=not args.no_velocity_limits,
-        position_limits=not args.no_position_limits, collisions=result.collisions,
-        waypoints=result.waypoints,
-    )
+def plan_request(args: argparse.Namespace) -> PlanRequest:
+    """The request of parsed ``nearopt plan`` arguments: every field of
+    :class:`~nearopt.api.PlanRequest` is the option of the same name (lists as tuples)."""
+    values = {}
+    for field in fields(PlanRequest):
+        value = getattr(args, field.name)
+        if isinstance(value, list):
+            value = tuple(tuple(v) if isinstance(v, list) else v for v in value)
+        values[field.name] = value
+    return PlanRequest(**values)
 
 
 def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
-    _check_request(args)
+    request = plan_request(args)
+    request.check()
+    if args.plots:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise ConfigurationError("--plots needs matplotlib: pip install 'nearopt[viz]'"
+                                     ) from None
     # every output is checked before planning, so that a bad path costs no planning time
     roles = {f"--{key}": getattr(args, key) for key in ("json", "csv", "html")
              if getattr(args, key)}
@@ -463,7 +233,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     outputs = check_outputs(roles)
     to_stdout = any(o.kind is OutputKind.STDOUT for o in outputs.values())
     out = sys.stderr if to_stdout else sys.stdout  # the standard output may carry a file
-    prepared = prepare(args)
+    prepared = prepare(request)
     quiet = args.quiet or args.stage1_only
 
     def progress(entry: Iteration) -> None:
@@ -473,7 +243,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
         print(f"segment {k + 1}  {_format(entry)}", file=out, flush=True)
 
     with interrupt.armed():
-        result = solve(prepared, args, None if quiet else progress,
+        result = solve(prepared, None if quiet else progress,
                        None if quiet else segment_progress)
     if isinstance(result, TaskResult):
         print(f"{result.status}: J = {result.J:.6f} (first paths {result.initial_J:.6f}), "
@@ -496,7 +266,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
         c = result.clearance
         print(f"clearance: closest {c.closest.pair} {c.closest.distance * 1e3:.1f} mm "
               f"(margin {c.level * 1e3:.1f} mm, certified along the whole path)", file=out)
-    report = check(result, prepared, args)
+    report = check(result, prepared)
     if args.verify:
         print(report, file=out)
     report.raise_if_failed()  # nothing is written for a motion that fails

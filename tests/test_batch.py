@@ -271,9 +271,9 @@ def test_bad_motion_files_are_one_line_errors(tmp_path: Path) -> None:
                              ({"q0": {"a": 1}}, "option values"),
                              ({"via": [0.1, 0.2]}, "list of lists")):
         with pytest.raises(nearopt.ConfigurationError, match=message):
-            MotionRequest("m", options).argv()
+            MotionRequest("m", options).plan_request()
     with pytest.raises(nearopt.ConfigurationError, match="option values"):  # not repeatable
-        MotionRequest("m", {"q0": [[0, 0], [0.3, 0.3]]}).argv()
+        MotionRequest("m", {"q0": [[0, 0], [0.3, 0.3]]}).plan_request()
     with pytest.raises(nearopt.ConfigurationError, match="--q0 is given twice"):
         nearopt.cli.parse_plan(["plan", "--robot", "two_link", "--q0", "0", "0", "--q0", "0.3",
                                 "0.3", "--qe", "1", "1"])

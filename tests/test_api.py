@@ -1,0 +1,104 @@
+"""One request model: the command line, a batch's motions and Python make the same PlanRequest;
+numbers in any float syntax reach the planner as they were written."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import signal
+from pathlib import Path
+
+import numpy as np
+import pytest
+from conftest import load
+
+import nearopt
+from nearopt.api import _KINDS, PlanRequest, run
+from nearopt.cli import main, parse_plan, plan_request
+
+
+def test_the_options_table_names_every_field() -> None:
+    assert set(_KINDS) == {f.name for f in dataclasses.fields(PlanRequest)}
+    parser_fields = vars(parse_plan(["plan", "--robot", "two_link", "--q0", "0", "0",
+                                     "--qe", "1", "1"]))
+    assert set(_KINDS) <= set(parser_fields)  # every field is an option of `nearopt plan`
+
+
+def test_the_command_line_and_a_mapping_make_the_same_request() -> None:
+    argv = ["plan", "--robot", "ur5", "--q0", "-1e-05", "-1.57", "-.5", "0", "1e-3", "-inf",
+            "--goal-pose", "0.307", "-2.69e-16", "0.4", "--via", "-1e-05", "0", "0", "0", "0",
+            "0", "--via", "1", "2", "3", "4", "5", "6", "--beta", "1e-3", "--grid", "80",
+            "--effort-limit", "-1e12", "--no-self-collision", "--time-limit", "inf",
+            "--quiet", "--verify"]
+    from_cli = plan_request(parse_plan(argv))
+    mapping = {"robot": "ur5", "q0": [-1e-05, -1.57, -0.5, 0, 1e-3, "-inf"],
+               "goal_pose": np.array([0.307, -2.69e-16, 0.4]),
+               "via": [[-1e-05, 0, 0, 0, 0, 0], (1, 2, 3, 4, 5, 6)], "beta": 1e-3, "grid": 80.0,
+               "effort_limit": -1e12, "self_collision": False, "time_limit": float("inf"),
+               "quiet": True, "verify": True}
+    assert PlanRequest.from_mapping(mapping) == from_cli
+    assert from_cli.q0[0] == -1e-05 and from_cli.goal_pose[1] == -2.69e-16
+    assert from_cli.q0[-1] == -np.inf and from_cli.self_collision is False
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"grid": 1.5}, "option 'grid' takes an integer"),
+    ({"deg": 1}, "option 'deg' takes true or false"),
+    ({"q0": []}, "takes at least one number"),
+    ({"q0": ["a"]}, "option 'q0' takes a number or a list of numbers"),
+    ({"robot": "two_link", "urdf": "x.urdf"}, "give the arm as robot"),
+    ({"robot": "two_link", "q0": [0, 0], "qe": [1, 1], "beta": 1.0, "time_optimal": True},
+     "give the cost as beta, weights or time_optimal, once"),
+    ({"robot": "two_link", "q0": [0, 0], "qe": [1, 1], "method": "newton"},
+     "method must be one of"),
+])
+def test_a_bad_mapping_says_which_option(options: dict, message: str) -> None:
+    with pytest.raises(nearopt.ConfigurationError, match=message):
+        PlanRequest.from_mapping(options).check()
+
+
+def test_small_negative_numbers_are_planned_by_a_batch() -> None:
+    """What a batch once turned back into argv (``-1e-05`` read as an option) is planned, and
+    each motion starts and ends where it was asked to."""
+    robot = load("two_link")
+    spot = robot.frame_position(np.array([0.4, -1.2]))
+    spot[np.abs(spot) < 1e-12] = -1e-17  # a zero written as a tiny negative number
+    common = {"robot": "two_link", "grid": 60, "max_iterations": 2}
+    motions = [
+        {**common, "q0": [-1e-05, -1.57], "qe": [-0.5, -1e-05]},
+        {**common, "q0": [-1e-05, -1.57], "qe": [0.5, -0.2], "via": [[-1e-05, -0.8]]},
+        {**common, "q0": [-1e-05, -1.57], "goal_pose": spot.tolist()},
+    ]
+    outcomes = nearopt.plan_many(motions, workers=2)
+    for outcome, motion in zip(outcomes, motions, strict=True):
+        assert outcome.status == "planned", outcome.error
+        trajectory = outcome.result.trajectory
+        np.testing.assert_allclose(trajectory(np.array([0.0]), 0)[0], motion["q0"], atol=1e-12)
+        end = trajectory(np.array([outcome.te]), 0)[0]
+        if "qe" in motion:
+            np.testing.assert_allclose(end, motion["qe"], atol=1e-9)
+        else:
+            assert np.linalg.norm(robot.frame_position(end) - spot) < 1e-6
+
+
+def test_small_negative_numbers_on_the_command_line(tmp_path: Path) -> None:
+    out = tmp_path / "plan.json"
+    handler = signal.getsignal(signal.SIGINT)
+    try:
+        code = main(["plan", "--robot", "two_link", "--q0", "-1e-3", "0.5", "--qe", "-.5",
+                     "-1e-05", "--stage1-only", "--grid", "60", "--quiet", "--json", str(out)])
+    finally:
+        signal.signal(signal.SIGINT, handler)
+    assert code == 0
+    q = np.array(json.loads(out.read_text())["q"])
+    np.testing.assert_allclose(q[0], [-1e-3, 0.5], atol=1e-12)
+    np.testing.assert_allclose(q[-1], [-0.5, -1e-05], atol=1e-9)
+
+
+def test_run_plans_and_verifies_in_this_process() -> None:
+    request = PlanRequest(robot="two_link", q0=(0.7, -1.5), qe=(-1.5, 0.0), beta=0.03, grid=60,
+                          max_iterations=3, rate=500.0)
+    outcome = run(request)
+    assert outcome.report.passed and outcome.prepared.request is request
+    assert isinstance(outcome.result, nearopt.PlanResult)
+    np.testing.assert_array_equal(outcome.result.cost.torque_weights(2), [0.03, 0.03])
