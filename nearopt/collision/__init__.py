@@ -5,7 +5,7 @@ pairs, signed distances, their gradients in θ, a certified check of a whole pat
 :func:`collision_free_path` (a first path around the obstacles, from OMPL).
 """
 
-from .model import Clearance, CollisionModel, Contact, Pair
+from .model import Clearance, CollisionModel, Contact, Pair, collisions_for
 from .scene import (
     DEFAULT_MARGIN,
     Box,
@@ -20,6 +20,7 @@ from .scene import (
 )
 
 __all__ = [
+    "collisions_for",
     "Scene",
     "Obstacle",
     "Shape",

@@ -53,7 +53,7 @@ if TYPE_CHECKING:
     from ..path import Path as JointPath
     from ..robot import Robot
 
-__all__ = ["CollisionModel", "Contact", "Clearance", "Pair"]
+__all__ = ["CollisionModel", "Contact", "Clearance", "Pair", "collisions_for"]
 
 
 @dataclass(frozen=True)
@@ -514,3 +514,32 @@ def _srdf_disabled(path: Path) -> set[frozenset[str]]:
 def _rebuild(robot: Robot, scene: Scene | None, srdf: str | Path | None, margin: float | None,
              self_collision: bool) -> CollisionModel:
     return CollisionModel(robot, scene, srdf=srdf, margin=margin, self_collision=self_collision)
+
+
+def collisions_for(
+    robot: Robot, scene: Scene | CollisionModel | None, margin: float | None,
+    self_collision: bool | None,
+) -> CollisionModel | None:
+    """The collision model a plan keeps, or None when nothing is checked: ``scene`` itself if it
+    is a model already (built for this robot), else one built from the scene (None: no
+    obstacles) with the margin [m] and self-collision (None: with a scene) asked for."""
+    if isinstance(scene, CollisionModel):
+        if scene.robot is not robot:
+            raise ConfigurationError("the collision model was built for another Robot object")
+        if margin is not None or self_collision is not None:
+            raise ConfigurationError(
+                "give margin and self_collision when building the CollisionModel, not to plan()"
+            )
+        return scene
+    if scene is not None and not isinstance(scene, Scene):
+        raise ConfigurationError(
+            f"scene must be a nearopt.collision.Scene (Scene.from_file(path)) or a "
+            f"CollisionModel, got {type(scene).__name__}"
+        )
+    if self_collision is None:
+        self_collision = scene is not None
+    if scene is None and not self_collision:
+        if margin is not None:
+            raise ConfigurationError("margin applies with a scene or self_collision=True")
+        return None
+    return CollisionModel(robot, scene, margin=margin, self_collision=bool(self_collision))

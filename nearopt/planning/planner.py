@@ -25,7 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..collision import Clearance, CollisionModel, Scene
+from ..collision import Clearance, CollisionModel, Scene, collisions_for
 from ..collision.sampling import collision_free_path
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import (
@@ -189,7 +189,7 @@ def plan(
         raise ConfigurationError(
             "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
         )
-    collisions = _collision_model(robot, scene, margin, self_collision)
+    collisions = collisions_for(robot, scene, margin, self_collision)
     if collisions is not None:
         if method == Method.PAPER:
             raise ConfigurationError(
@@ -481,33 +481,6 @@ def _screen(
     if best is None:
         return candidates[0], candidates[0]
     return best[1], best[2]
-
-
-def _collision_model(
-    robot: Robot, scene: Scene | CollisionModel | None, margin: float | None,
-    self_collision: bool | None,
-) -> CollisionModel | None:
-    """The collision model the plan keeps, or None when nothing is checked."""
-    if isinstance(scene, CollisionModel):
-        if scene.robot is not robot:
-            raise ConfigurationError("the collision model was built for another Robot object")
-        if margin is not None or self_collision is not None:
-            raise ConfigurationError(
-                "give margin and self_collision when building the CollisionModel, not to plan()"
-            )
-        return scene
-    if scene is not None and not isinstance(scene, Scene):
-        raise ConfigurationError(
-            f"scene must be a nearopt.collision.Scene (Scene.from_file(path)) or a "
-            f"CollisionModel, got {type(scene).__name__}"
-        )
-    if self_collision is None:
-        self_collision = scene is not None
-    if scene is None and not self_collision:
-        if margin is not None:
-            raise ConfigurationError("margin applies with a scene or self_collision=True")
-        return None
-    return CollisionModel(robot, scene, margin=margin, self_collision=bool(self_collision))
 
 
 def _certify(collisions: CollisionModel, path: Path) -> Clearance:

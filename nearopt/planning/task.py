@@ -36,7 +36,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..collision import Clearance, CollisionModel, Scene
+from ..collision import Clearance, CollisionModel, Scene, collisions_for
 from ..cost import Cost, TimeCost
 from ..errors import ConfigurationError, NearoptError, TaskError
 from ..inputs import read_toml
@@ -44,7 +44,7 @@ from ..kinematics import ToolPose
 from ..robot import Robot
 from ..trajectory import ChainedTrajectory
 from ..verify import Waypoint
-from .planner import _collision_model, plan
+from .planner import plan
 from .records import Iteration, Method, PaperOptions, PlanResult, SCPOptions, StopReason
 
 if TYPE_CHECKING:
@@ -373,7 +373,7 @@ self_collision
     check_targets(robot, records, q0, position_limits=position_limits,
                   where=None if not isinstance(targets, Task) or targets.source is None
                   else str(targets.source))
-    collisions = _collision_model(robot, scene, margin, self_collision)
+    collisions = collisions_for(robot, scene, margin, self_collision)
     groups: list[list[Target]] = [[]]
     for target in records:
         groups[-1].append(target)
