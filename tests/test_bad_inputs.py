@@ -4,8 +4,6 @@ stderr with a non-zero exit code and no output file (CLI) — never a traceback,
 
 from __future__ import annotations
 
-import subprocess
-import sys
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -13,6 +11,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import load
+from console import run_cli
 from urdfs import erd_urdf, write_urdf
 
 import nearopt
@@ -481,8 +480,8 @@ def test_cli_answers_with_one_line_and_writes_nothing(name: str, tmp_path: Path)
     work.mkdir()
     args = case.cli(work)
     before = sorted(work.rglob("*"))
-    done = subprocess.run([sys.executable, "-m", "nearopt.cli", "plan", *args],
-                          capture_output=True, text=True, timeout=300, cwd=work)
+    done = run_cli("plan", *args, cwd=work)  # in this process: the console script is
+    # tested as a process in test_cli.py (exit codes, one-line errors)
     assert done.returncode != 0
     lines = done.stderr.strip().splitlines()
     assert len(lines) == 1 and lines[0].startswith("nearopt: error: "), done.stderr

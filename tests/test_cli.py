@@ -11,6 +11,7 @@ import numpy as np
 import pytest
 from checks import torques_from_samples, worst_torque_excess
 from conftest import load
+from console import run_cli
 from urdfs import erd_urdf
 
 import nearopt
@@ -19,7 +20,9 @@ PAPER = ["--robot", "two_link", "--q0", "45", "-90", "--qe", "-90", "0", "--deg"
 
 
 def run(*args: str) -> subprocess.CompletedProcess[str]:
-    """The console script as a user runs it (the module's entry point, in a subprocess)."""
+    """The console script as a user runs it (the module's entry point, in a subprocess): for
+    what is about the process (exit codes, the entry point); the rest runs ``main`` in this
+    process (:func:`console.run_cli`)."""
     return subprocess.run(
         [sys.executable, "-m", "nearopt.cli", *args], capture_output=True, text=True, timeout=600
     )
@@ -29,7 +32,7 @@ def run(*args: str) -> subprocess.CompletedProcess[str]:
 def test_plan_writes_the_documented_json(tmp_path: Path, mode: list[str]) -> None:
     target = tmp_path / "plan.json"
     table = tmp_path / "plan.csv"
-    done = run("plan", *PAPER, "--beta", "0.03", "--grid", "100", "--max-iterations", "20",
+    done = run_cli("plan", *PAPER, "--beta", "0.03", "--grid", "100", "--max-iterations", "20",
                "--quiet", "--json", str(target), "--csv", str(table), "--rate", "500", *mode)
     assert done.returncode == 0, done.stderr
     doc = json.loads(target.read_text())
@@ -62,7 +65,7 @@ def test_plan_writes_the_documented_json(tmp_path: Path, mode: list[str]) -> Non
 
 
 def test_plots_and_html_are_written(tmp_path: Path) -> None:
-    done = run("plan", *PAPER, "--beta", "0.03", "--grid", "40", "--max-iterations", "3",
+    done = run_cli("plan", *PAPER, "--beta", "0.03", "--grid", "40", "--max-iterations", "3",
                "--quiet", "--plots", str(tmp_path / "figures"), "--html", str(tmp_path / "a.html"))
     assert done.returncode == 0, done.stderr
     assert sorted(p.name for p in (tmp_path / "figures").iterdir()) == [
@@ -153,7 +156,7 @@ def test_acceleration_limits_make_the_1khz_record_faithful(tmp_path: Path, name:
     limit, h = 10.0, 1e-3
     for extra in (["--acceleration-limit", str(limit)], []):
         target = tmp_path / "plan.json"
-        done = run("plan", "--robot", name, *ends, "--max-iterations", "5", "--quiet",
+        done = run_cli("plan", "--robot", name, *ends, "--max-iterations", "5", "--quiet",
                    "--json", str(target), *extra)
         assert done.returncode == 0, done.stderr
         doc = json.loads(target.read_text())
@@ -193,7 +196,7 @@ def test_shipped_urdfs_plan_from_the_command_line(tmp_path: Path, name: str) -> 
     hi = np.minimum(robot.limits.position_upper, np.pi)
     q0, qe = lo + start * (hi - lo), lo + end * (hi - lo)
     target = tmp_path / "plan.json"
-    done = run("plan", "--urdf", str(path), *options, "--q0", *map(str, q0), "--qe",
+    done = run_cli("plan", "--urdf", str(path), *options, "--q0", *map(str, q0), "--qe",
                *map(str, qe), "--max-iterations", "4", "--quiet", "--json", str(target))
     assert done.returncode == 0, done.stderr
     doc = json.loads(target.read_text())

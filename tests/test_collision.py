@@ -8,8 +8,6 @@ bodies placed from Pinocchio's frame placements (not the planner's ``computeDist
 
 from __future__ import annotations
 
-import subprocess
-import sys
 import xml.etree.ElementTree as ET
 
 import coal
@@ -18,6 +16,7 @@ import pinocchio as pin
 import pytest
 from checks import RATE, assert_independent_checks
 from conftest import load, random_configuration
+from console import run_cli
 from scipy.spatial import ConvexHull
 
 import nearopt
@@ -344,12 +343,9 @@ def test_a_bad_scene_file_names_the_obstacle_and_the_field(
 def test_the_cli_refuses_a_bad_scene_in_one_line_and_writes_nothing(tmp_path) -> None:  # noqa: ANN001
     (tmp_path / "cell.toml").write_text('[[obstacle]]\nname = "post"\ncylinder = [0.05]\n')
     out = tmp_path / "plan.json"
-    run = subprocess.run(
-        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5",
-         "--q0", *map(str, MOTIONS["ur5"][0]), "--qe", *map(str, MOTIONS["ur5"][1]),
-         "--scene", str(tmp_path / "cell.toml"), "--json", str(out)],
-        capture_output=True, text=True, cwd=tmp_path, timeout=300,
-    )
+    run = run_cli("plan", "--robot", "ur5",
+                  "--q0", *map(str, MOTIONS["ur5"][0]), "--qe", *map(str, MOTIONS["ur5"][1]),
+                  "--scene", str(tmp_path / "cell.toml"), "--json", str(out), cwd=tmp_path)
     assert run.returncode != 0 and not out.exists()
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and "'post'" in lines[0] and "cylinder" in lines[0], run.stderr

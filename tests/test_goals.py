@@ -4,8 +4,6 @@ end at the pose (checked by forward kinematics on the written samples), and the 
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +11,7 @@ import pinocchio as pin
 import pytest
 from checks import assert_independent_checks
 from conftest import load, random_configuration
+from console import run_cli
 
 import nearopt
 from nearopt import ToolPose, UnreachablePoseError, inverse_kinematics
@@ -49,13 +48,10 @@ def test_a_plan_to_a_tool_pose_ends_there(name: str, rng: np.random.Generator,
     q0 = random_configuration(robot, rng)
     target = pose_of(robot, random_configuration(robot, rng))
     out = tmp_path / "plan.json"
-    run = subprocess.run(
-        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", name,
-         "--q0", *map(str, q0), "--goal-pose", *map(str, target.position),
-         *map(str, target.quaternion), "--time-optimal", "--grid", "100", "--quiet",
-         "--json", str(out)],
-        capture_output=True, text=True, timeout=300,
-    )
+    run = run_cli("plan", "--robot", name,
+                  "--q0", *map(str, q0), "--goal-pose", *map(str, target.position),
+                  *map(str, target.quaternion), "--time-optimal", "--grid", "100", "--quiet",
+                  "--json", str(out))
     assert run.returncode == 0, run.stderr
     q = np.array(json.loads(out.read_text())["q"])
     np.testing.assert_allclose(q[0], q0, atol=1e-12)
@@ -109,11 +105,8 @@ def test_an_unknown_frame_lists_the_frames() -> None:
     with pytest.raises(nearopt.ConfigurationError, match="no frame 'gripper'; its links: .*"
                                                          "wrist_3_link"):
         nearopt.plan(robot, np.zeros(6), ToolPose((0.4, 0.0, 0.4), frame="gripper"))
-    run = subprocess.run(
-        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--q0", *["0"] * 6,
-         "--goal-pose", "0.4", "0", "0.4", "--frame", "gripper"],
-        capture_output=True, text=True, timeout=120,
-    )
+    run = run_cli("plan", "--robot", "ur5", "--q0", *["0"] * 6,
+                  "--goal-pose", "0.4", "0", "0.4", "--frame", "gripper")
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1 and "tool0" in lines[0], run.stderr
 
@@ -126,10 +119,8 @@ def test_an_unknown_frame_lists_the_frames() -> None:
     ["--qe", *["0.1"] * 6, "--via", "9", "0", "0", "0", "0", "0"],
 ])
 def test_bad_goal_and_via_options_get_one_line(args: list[str]) -> None:
-    run = subprocess.run(
-        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--q0", *["0"] * 6,
-         *args], capture_output=True, text=True, timeout=120,
-    )
+    run = run_cli("plan", "--robot", "ur5", "--q0", *["0"] * 6,
+                  *args)
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1, run.stderr
 
 
@@ -176,12 +167,9 @@ def test_via_points_are_passed_exactly_without_stopping(tmp_path: Path) -> None:
     q0, qe = [-0.8, -1.2, 1.2, -1.5, -1.57, 0.0], [0.8, -1.2, 1.2, -1.5, -1.57, 0.0]
     via = [0.0, -1.6, 0.8, -1.0, -1.57, 0.5]
     out = tmp_path / "via.json"
-    run = subprocess.run(
-        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--q0", *map(str, q0),
-         "--qe", *map(str, qe), "--via", *map(str, via), "--beta", "0.001", "--quiet",
-         "--rate", "2000", "--json", str(out)],
-        capture_output=True, text=True, timeout=300,
-    )
+    run = run_cli("plan", "--robot", "ur5", "--q0", *map(str, q0),
+                  "--qe", *map(str, qe), "--via", *map(str, via), "--beta", "0.001", "--quiet",
+                  "--rate", "2000", "--json", str(out))
     assert run.returncode == 0, run.stderr
     doc = json.loads(out.read_text())
     (mark,) = doc["via"]

@@ -14,6 +14,7 @@ import pinocchio as pin
 import pytest
 from checks import assert_independent_checks
 from conftest import load
+from console import run_cli
 
 import nearopt
 from nearopt import ChainedTrajectory, Target, Task, TaskError, ToolPose, Waypoint
@@ -147,12 +148,9 @@ def test_the_cli_plans_a_task_file_and_marks_the_segments(tmp_path: Path) -> Non
     )
     task.write_text(f"start = {UR5_START.tolist()}\n{rows}")
     out, table = tmp_path / "task.json", tmp_path / "task.csv"
-    run = subprocess.run(
-        [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--task", str(task),
-         "--beta", "0.001", "--max-iterations", "3", "--grid", "100", "--quiet",
-         "--json", str(out), "--csv", str(table)],
-        capture_output=True, text=True, timeout=300,
-    )
+    run = run_cli("plan", "--robot", "ur5", "--task", str(task),
+                  "--beta", "0.001", "--max-iterations", "3", "--grid", "100", "--quiet",
+                  "--json", str(out), "--csv", str(table))
     assert run.returncode == 0, run.stderr
     assert "2 segments" in run.stdout and "segment 2 (to end)" in run.stdout
     doc = json.loads(out.read_text())
@@ -172,13 +170,12 @@ def test_the_cli_plans_a_task_file_and_marks_the_segments(tmp_path: Path) -> Non
     assert np.abs(qd).max() < 0.05
     for args, message in ((["--qe", *map(str, UR5_GOAL)], "once"),
                           (["--via", *map(str, UR5_PASS)], "--via applies")):
-        run = subprocess.run(
-            [sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5", "--task", str(task),
-             *args], capture_output=True, text=True, timeout=120)
+        run = run_cli("plan", "--robot", "ur5", "--task", str(task),
+                      *args)
         assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
     task.write_text(rows)  # no start in the file, none on the command line
-    run = subprocess.run([sys.executable, "-m", "nearopt.cli", "plan", "--robot", "ur5",
-                          "--task", str(task)], capture_output=True, text=True, timeout=120)
+    run = run_cli("plan", "--robot", "ur5",
+                  "--task", str(task))
     assert run.returncode == 2 and "start configuration" in run.stderr
 
 
