@@ -35,8 +35,20 @@ from .verify import VerificationReport, verify
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-__all__ = ["PlanRequest", "Prepared", "Outcome", "RobotLoader", "prepare", "solve", "check", "run",
-           "OUTPUT_OPTIONS", "DISPLAY_OPTIONS", "MAX_SAMPLES", "MAX_RATE"]
+__all__ = [
+    "PlanRequest",
+    "Prepared",
+    "Outcome",
+    "RobotLoader",
+    "prepare",
+    "solve",
+    "check",
+    "run",
+    "OUTPUT_OPTIONS",
+    "DISPLAY_OPTIONS",
+    "MAX_SAMPLES",
+    "MAX_RATE",
+]
 
 MAX_SAMPLES = 10_000_000  # rate × te: beyond this a file would take gigabytes
 MAX_RATE = 1e6  # [Hz] a sampling rate above a megahertz is a mistake, not a controller
@@ -173,13 +185,15 @@ class PlanRequest:
             Naming the option and the value.
         """
         if (self.robot is None) == (self.urdf is None):
-            raise ConfigurationError("give the arm as robot (a known name) or as urdf (a file), "
-                                     "once")
+            raise ConfigurationError(
+                "give the arm as robot (a known name) or as urdf (a file), once"
+            )
         if sum((self.beta is not None, self.weights is not None, self.time_optimal)) > 1:
             raise ConfigurationError("give the cost as beta, weights or time_optimal, once")
         if self.method not in METHODS:
-            raise ConfigurationError(f"method must be one of {', '.join(METHODS)}, got "
-                                     f"{self.method!r}")
+            raise ConfigurationError(
+                f"method must be one of {', '.join(METHODS)}, got {self.method!r}"
+            )
         if not (np.isfinite(self.rate) and 0 < self.rate <= MAX_RATE):
             raise ConfigurationError(
                 f"--rate must be a number of Hz in (0, {MAX_RATE:.0e}], got {self.rate}"
@@ -206,8 +220,9 @@ class PlanRequest:
         if self.base and not self.tip:
             raise ConfigurationError("--base needs --tip: the chain goes from the base to the tip")
         if self.group and not self.urdf:
-            raise ConfigurationError("--group applies to --urdf (a named robot chooses its own "
-                                     "joints)")
+            raise ConfigurationError(
+                "--group applies to --urdf (a named robot chooses its own joints)"
+            )
         if self.group and not self.srdf:
             raise ConfigurationError("--group needs --srdf: the group is read from the SRDF")
         if self.group and self.tip:
@@ -219,16 +234,20 @@ class PlanRequest:
                 "give the goal as --qe (joint values), as --goal-pose or as a --task file, once"
             )
         if self.task is not None and self.via:
-            raise ConfigurationError("--via applies to --qe or --goal-pose (a --task file lists "
-                                     "its targets, stop = false to pass through)")
+            raise ConfigurationError(
+                "--via applies to --qe or --goal-pose (a --task file lists "
+                "its targets, stop = false to pass through)"
+            )
         if self.task is not None and self.frame:
-            raise ConfigurationError("--frame applies to --goal-pose (a --task file gives its "
-                                     "frame)")
+            raise ConfigurationError(
+                "--frame applies to --goal-pose (a --task file gives its frame)"
+            )
         if self.task is None and self.q0 is None:
             raise ConfigurationError("give the start configuration, --q0")
         if self.task is not None and self.deg and self.q0 is None:
-            raise ConfigurationError("--deg applies to --q0 (a --task file gives its units: "
-                                     "units = \"deg\")")
+            raise ConfigurationError(
+                '--deg applies to --q0 (a --task file gives its units: units = "deg")'
+            )
         if self.goal_pose is not None and len(self.goal_pose) not in (3, 7):
             raise ConfigurationError(
                 f"--goal-pose takes x y z [m] or x y z qx qy qz qw, got {len(self.goal_pose)} "
@@ -253,23 +272,47 @@ class PlanRequest:
 
 
 _KINDS: dict[str, _Kind] = {
-    "robot": _Kind.TEXT, "urdf": _Kind.TEXT, "lock": _Kind.TEXTS, "tip": _Kind.TEXT,
-    "base": _Kind.TEXT, "srdf": _Kind.TEXT, "group": _Kind.TEXT, "lock_at": _Kind.TEXTS,
-    "effort_limit": _Kind.NUMBERS, "velocity_limit": _Kind.NUMBERS,
-    "velocity_scale": _Kind.NUMBER, "acceleration_limit": _Kind.NUMBERS, "q0": _Kind.NUMBERS,
-    "qe": _Kind.NUMBERS, "goal_pose": _Kind.NUMBERS, "frame": _Kind.TEXT, "via": _Kind.POINTS,
-    "task": _Kind.TEXT, "fixed_goal": _Kind.FLAG, "deg": _Kind.FLAG, "beta": _Kind.NUMBER,
-    "weights": _Kind.NUMBERS, "time_optimal": _Kind.FLAG, "stage1_only": _Kind.FLAG,
-    "method": _Kind.TEXT, "grid": _Kind.INTEGER, "max_iterations": _Kind.INTEGER,
-    "time_limit": _Kind.NUMBER, "no_velocity_limits": _Kind.FLAG,
-    "no_position_limits": _Kind.FLAG, "scene": _Kind.TEXT, "margin": _Kind.NUMBER,
-    "self_collision": _Kind.SWITCH, "rate": _Kind.NUMBER,
+    "robot": _Kind.TEXT,
+    "urdf": _Kind.TEXT,
+    "lock": _Kind.TEXTS,
+    "tip": _Kind.TEXT,
+    "base": _Kind.TEXT,
+    "srdf": _Kind.TEXT,
+    "group": _Kind.TEXT,
+    "lock_at": _Kind.TEXTS,
+    "effort_limit": _Kind.NUMBERS,
+    "velocity_limit": _Kind.NUMBERS,
+    "velocity_scale": _Kind.NUMBER,
+    "acceleration_limit": _Kind.NUMBERS,
+    "q0": _Kind.NUMBERS,
+    "qe": _Kind.NUMBERS,
+    "goal_pose": _Kind.NUMBERS,
+    "frame": _Kind.TEXT,
+    "via": _Kind.POINTS,
+    "task": _Kind.TEXT,
+    "fixed_goal": _Kind.FLAG,
+    "deg": _Kind.FLAG,
+    "beta": _Kind.NUMBER,
+    "weights": _Kind.NUMBERS,
+    "time_optimal": _Kind.FLAG,
+    "stage1_only": _Kind.FLAG,
+    "method": _Kind.TEXT,
+    "grid": _Kind.INTEGER,
+    "max_iterations": _Kind.INTEGER,
+    "time_limit": _Kind.NUMBER,
+    "no_velocity_limits": _Kind.FLAG,
+    "no_position_limits": _Kind.FLAG,
+    "scene": _Kind.TEXT,
+    "margin": _Kind.NUMBER,
+    "self_collision": _Kind.SWITCH,
+    "rate": _Kind.NUMBER,
 }
 """The one table of options: every field of :class:`PlanRequest` and how a mapping gives it."""
 
 
 def _read(key: str, value: object, kind: _Kind) -> object:
     """A mapping's value of option ``key`` as the field holds it."""
+
     def wrong() -> ConfigurationError:
         return ConfigurationError(
             f"option values are numbers, strings, or lists of them: option {key!r} takes "
@@ -308,8 +351,9 @@ def _read(key: str, value: object, kind: _Kind) -> object:
             raise wrong()
         return tuple(_number(key, v, wrong) for v in items)
     # points: a list of lists
-    if not isinstance(value, list | tuple) or not all(isinstance(v, list | tuple) and v
-                                                      for v in value):
+    if not isinstance(value, list | tuple) or not all(
+        isinstance(v, list | tuple) and v for v in value
+    ):
         raise ConfigurationError(
             f"option {key!r} is a list of lists (one per {key} point), got {value!r:.60}"
         )
@@ -392,8 +436,9 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
     elif task is not None and task.start is not None:
         q0 = np.asarray(task.start)
     else:
-        raise ConfigurationError(f"give the start configuration: --q0, or start = [...] in "
-                                 f"{request.task}")
+        raise ConfigurationError(
+            f"give the start configuration: --q0, or start = [...] in {request.task}"
+        )
     qe: NDArray[np.float64] | ToolPose | None = None
     if request.goal_pose is not None:
         pose = request.goal_pose
@@ -433,10 +478,23 @@ def solve(
         optimise_goal=not request.fixed_goal,
     )
     if prepared.task is not None:
-        return plan_task(prepared.robot, prepared.q0, prepared.task, prepared.cost,
-                         callback=segment_callback, **common)  # type: ignore[arg-type]
-    return plan(prepared.robot, prepared.q0, prepared.qe, prepared.cost, callback=callback,
-                via=prepared.via, **common)  # type: ignore[arg-type]
+        return plan_task(
+            prepared.robot,
+            prepared.q0,
+            prepared.task,
+            prepared.cost,
+            callback=segment_callback,
+            **common,
+        )  # type: ignore[arg-type]
+    return plan(
+        prepared.robot,
+        prepared.q0,
+        prepared.qe,
+        prepared.cost,
+        callback=callback,
+        via=prepared.via,
+        **common,
+    )  # type: ignore[arg-type]
 
 
 def check(result: PlanResult | TaskResult, prepared: Prepared) -> VerificationReport:
@@ -459,10 +517,17 @@ def check(result: PlanResult | TaskResult, prepared: Prepared) -> VerificationRe
         last = prepared.task.targets[-1].goal
         qe = last if isinstance(last, ToolPose) else np.asarray(last)
     return verify(
-        result.trajectory, prepared.robot, rate=max(request.rate, 1000.0), q0=prepared.q0,
-        qe=None if isinstance(qe, ToolPose) else qe, goal_pose=result.goal, cost=result.cost,
-        J=result.J, velocity_limits=not request.no_velocity_limits,
-        position_limits=not request.no_position_limits, collisions=result.collisions,
+        result.trajectory,
+        prepared.robot,
+        rate=max(request.rate, 1000.0),
+        q0=prepared.q0,
+        qe=None if isinstance(qe, ToolPose) else qe,
+        goal_pose=result.goal,
+        cost=result.cost,
+        J=result.J,
+        velocity_limits=not request.no_velocity_limits,
+        position_limits=not request.no_position_limits,
+        collisions=result.collisions,
         waypoints=result.waypoints,
     )
 
@@ -522,20 +587,38 @@ def _robot(request: PlanRequest, loader: RobotLoader | None = None) -> Robot:
 
     def load() -> Robot:
         if request.robot:
-            return Robot.from_name(request.robot,
-                                   **({"srdf": request.srdf} if request.srdf else {}))
+            return Robot.from_name(
+                request.robot, **({"srdf": request.srdf} if request.srdf else {})
+            )
         return Robot.from_urdf(
-            request.urdf, locked_joints=request.lock, tip=request.tip, base=request.base,
-            lock_at=_lock_values(request.lock_at), srdf=request.srdf, group=request.group,
+            request.urdf,
+            locked_joints=request.lock,
+            tip=request.tip,
+            base=request.base,
+            lock_at=_lock_values(request.lock_at),
+            srdf=request.srdf,
+            group=request.group,
             effort_limit=single_effort,
         )
 
-    key = (request.robot, request.urdf, request.lock, request.tip, request.base, request.srdf,
-           request.group, request.lock_at, None if request.robot else single_effort)
+    key = (
+        request.robot,
+        request.urdf,
+        request.lock,
+        request.tip,
+        request.base,
+        request.srdf,
+        request.group,
+        request.lock_at,
+        None if request.robot else single_effort,
+    )
     robot = load() if loader is None else loader(key, load)
     overrides: dict[str, Any] = {}
-    for option, name in (("effort_limit", "effort"), ("velocity_limit", "velocity"),
-                         ("acceleration_limit", "acceleration")):
+    for option, name in (
+        ("effort_limit", "effort"),
+        ("velocity_limit", "velocity"),
+        ("acceleration_limit", "acceleration"),
+    ):
         values = getattr(request, option)
         if values is not None:
             overrides[name] = _per_joint(values, robot, f"--{option.replace('_', '-')}")

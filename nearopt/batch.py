@@ -90,8 +90,9 @@ class MotionRequest:
     options: Mapping[str, Any]
 
     @classmethod
-    def from_dict(cls, data: Mapping[str, Any], default_id: str,
-                  folder: Path | None = None) -> MotionRequest:
+    def from_dict(
+        cls, data: Mapping[str, Any], default_id: str, folder: Path | None = None
+    ) -> MotionRequest:
         """A request from a JSON object (``id`` and options); relative file paths are taken
         from ``folder`` (default: the working folder).
 
@@ -138,8 +139,10 @@ class MotionRequest:
                     files[key] = hashlib.sha256(Path(name).read_bytes()).hexdigest()
                 except OSError:
                     files[key] = None
-        return json.dumps({"id": self.id, **self.options, "file_sha256": files,
-                           "batch_rate": float(rate)}, sort_keys=True)
+        return json.dumps(
+            {"id": self.id, **self.options, "file_sha256": files, "batch_rate": float(rate)},
+            sort_keys=True,
+        )
 
 
 def _plain(value: object) -> object:
@@ -219,8 +222,9 @@ class MotionOutcome:
 # one motion, in a worker
 
 
-def plan_request(request: MotionRequest, rate: float = 1000.0,
-                 keep_result: bool = False) -> MotionOutcome:
+def plan_request(
+    request: MotionRequest, rate: float = 1000.0, keep_result: bool = False
+) -> MotionOutcome:
     """Plan, verify and write out one motion as ``nearopt plan`` would (in this process).
 
     Every error a motion can cause (a bad option, an infeasible request, a failed verification)
@@ -233,29 +237,54 @@ def plan_request(request: MotionRequest, rate: float = 1000.0,
         outcome = run(request.plan_request(rate), robot_loader=_cached_robot)
         result = outcome.result
         segments = getattr(result, "segments", None)
-        iterations = (sum(len(s.history) - 1 for s in segments) if segments is not None
-                      else len(result.history) - 1)
+        iterations = (
+            sum(len(s.history) - 1 for s in segments)
+            if segments is not None
+            else len(result.history) - 1
+        )
         wall = time.perf_counter() - t0
         notes = list(outcome.warnings)
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", SamplingWarning)
-            text = json_text(result, outcome.prepared.request.rate, extra={
-                "id": request.id,
-                "request": json.loads(request.fingerprint(rate)),
-                "batch": {"status": str(result.status), "iterations": iterations,
-                          "wall_time": wall, "warnings": notes},
-            })
+            text = json_text(
+                result,
+                outcome.prepared.request.rate,
+                extra={
+                    "id": request.id,
+                    "request": json.loads(request.fingerprint(rate)),
+                    "batch": {
+                        "status": str(result.status),
+                        "iterations": iterations,
+                        "wall_time": wall,
+                        "warnings": notes,
+                    },
+                },
+            )
     except (NearoptError, OSError) as exc:
         error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
         wall = time.perf_counter() - t0
-        document = json.dumps({"id": request.id, "request": json.loads(request.fingerprint(rate)),
-                               "error": error, "wall_time": wall})
-        return MotionOutcome(request.id, OutcomeStatus.FAILED, error=error, wall_time=wall,
-                             document=document)
+        document = json.dumps(
+            {
+                "id": request.id,
+                "request": json.loads(request.fingerprint(rate)),
+                "error": error,
+                "wall_time": wall,
+            }
+        )
+        return MotionOutcome(
+            request.id, OutcomeStatus.FAILED, error=error, wall_time=wall, document=document
+        )
     return MotionOutcome(
-        request.id, OutcomeStatus.PLANNED, stop=str(result.status), J=float(result.J),
-        te=float(result.duration), iterations=iterations, wall_time=wall, warnings=tuple(notes),
-        document=text, result=result if keep_result else None,
+        request.id,
+        OutcomeStatus.PLANNED,
+        stop=str(result.status),
+        J=float(result.J),
+        te=float(result.duration),
+        iterations=iterations,
+        wall_time=wall,
+        warnings=tuple(notes),
+        document=text,
+        result=result if keep_result else None,
     )
 
 
@@ -285,8 +314,9 @@ class Pool:
 
     workers: int
 
-    def run(self, requests: Sequence[MotionRequest], rate: float,
-            keep_result: bool) -> Iterator[MotionOutcome]:  # pragma: no cover - interface
+    def run(
+        self, requests: Sequence[MotionRequest], rate: float, keep_result: bool
+    ) -> Iterator[MotionOutcome]:  # pragma: no cover - interface
         """Plan every request; yield the outcomes in the order they finish."""
         raise NotImplementedError
 
@@ -321,7 +351,8 @@ class LocalPool(Pool):
     def _start(self) -> cf.ProcessPoolExecutor:
         if self._executor is None:
             self._executor = cf.ProcessPoolExecutor(
-                self.workers, mp_context=multiprocessing.get_context("spawn"),
+                self.workers,
+                mp_context=multiprocessing.get_context("spawn"),
                 initializer=_worker_start,
             )
         return self._executor
@@ -331,8 +362,9 @@ class LocalPool(Pool):
         executor = self._executor
         return [] if executor is None else list(executor._processes)  # noqa: SLF001
 
-    def run(self, requests: Sequence[MotionRequest], rate: float,
-            keep_result: bool) -> Iterator[MotionOutcome]:
+    def run(
+        self, requests: Sequence[MotionRequest], rate: float, keep_result: bool
+    ) -> Iterator[MotionOutcome]:
         attempts = dict.fromkeys((r.id for r in requests), 0)
         order = {r.id: k for k, r in enumerate(requests)}
         pending = list(requests)
@@ -376,10 +408,16 @@ def _worker_start() -> None:
 
 
 def _died(request: MotionRequest, attempts: int) -> MotionOutcome:
-    error = (f"WorkerDied: the worker process planning it died {attempts} times (killed, out of "
-             "memory, or a crash in a native library)")
-    return MotionOutcome(request.id, OutcomeStatus.FAILED, error=error,
-                         document=json.dumps({"id": request.id, "error": error}))
+    error = (
+        f"WorkerDied: the worker process planning it died {attempts} times (killed, out of "
+        "memory, or a crash in a native library)"
+    )
+    return MotionOutcome(
+        request.id,
+        OutcomeStatus.FAILED,
+        error=error,
+        document=json.dumps({"id": request.id, "error": error}),
+    )
 
 
 class DaskPool(Pool):
@@ -415,16 +453,23 @@ class DaskPool(Pool):
                     f"cannot connect to the Dask scheduler at {address}: {exc}"
                 ) from None
             self._own = True
-        self.workers = max(1, sum(
-            w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values()
-        ))
+        self.workers = max(
+            1, sum(w.get("nthreads", 1) for w in self.client.scheduler_info()["workers"].values())
+        )
 
-    def run(self, requests: Sequence[MotionRequest], rate: float,
-            keep_result: bool) -> Iterator[MotionOutcome]:
+    def run(
+        self, requests: Sequence[MotionRequest], rate: float, keep_result: bool
+    ) -> Iterator[MotionOutcome]:
         distributed = self._distributed
         futures = {
-            self.client.submit(plan_request, r, rate, keep_result, pure=False,
-                               key=f"nearopt-{r.id}-{time.time_ns()}"): r
+            self.client.submit(
+                plan_request,
+                r,
+                rate,
+                keep_result,
+                pure=False,
+                key=f"nearopt-{r.id}-{time.time_ns()}",
+            ): r
             for r in requests
         }
         try:
@@ -459,8 +504,9 @@ def read_requests(path: str | Path) -> list[MotionRequest]:
     try:
         text = path.read_text(encoding="utf-8")
     except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigurationError(f"cannot read the motions file {path}: "
-                                 f"{getattr(exc, 'strerror', None) or exc}") from None
+        raise ConfigurationError(
+            f"cannot read the motions file {path}: {getattr(exc, 'strerror', None) or exc}"
+        ) from None
     requests: list[MotionRequest] = []
     seen: dict[str, int] = {}
     for number, line in enumerate(text.splitlines(), start=1):
@@ -475,8 +521,9 @@ def read_requests(path: str | Path) -> list[MotionRequest]:
         except ConfigurationError as exc:
             raise ConfigurationError(f"{path}, line {number}: {exc}") from None
         if request.id in seen:
-            raise ConfigurationError(f"{path}, line {number}: id {request.id!r} repeats line "
-                                     f"{seen[request.id]}")
+            raise ConfigurationError(
+                f"{path}, line {number}: id {request.id!r} repeats line {seen[request.id]}"
+            )
         seen[request.id] = number
         requests.append(request)
     if not requests:
@@ -625,9 +672,12 @@ def run_batch(
                 # the motion's file and the summary that lists it: both or neither (Ctrl-C)
                 if not planned:
                     name.parent.mkdir(exist_ok=True)
-                write_outputs({resolve_output(name): outcome.document,
-                               resolve_output(folder / "summary.csv"):
-                               _summary_text(requests, outcomes)})
+                write_outputs(
+                    {
+                        resolve_output(name): outcome.document,
+                        resolve_output(folder / "summary.csv"): _summary_text(requests, outcomes),
+                    }
+                )
                 finished += 1
                 if progress is not None:
                     elapsed = time.perf_counter() - started
@@ -639,8 +689,11 @@ def run_batch(
         finally:
             if own:
                 pool.close(abort=aborted)
-    return BatchSummary(tuple(outcomes[r.id] for r in requests if r.id in outcomes), skipped,
-                        time.perf_counter() - t0)
+    return BatchSummary(
+        tuple(outcomes[r.id] for r in requests if r.id in outcomes),
+        skipped,
+        time.perf_counter() - t0,
+    )
 
 
 def _light(outcome: MotionOutcome) -> MotionOutcome:
@@ -653,8 +706,9 @@ def _file(folder: Path, motion_id: str, planned: bool) -> Path:
     return folder / f"{motion_id}.json" if planned else folder / "failed" / f"{motion_id}.json"
 
 
-def _done(folder: Path, request: MotionRequest, retry_failed: bool,
-          rate: float) -> MotionOutcome | None:
+def _done(
+    folder: Path, request: MotionRequest, retry_failed: bool, rate: float
+) -> MotionOutcome | None:
     """The outcome an earlier run wrote for the same request, or None."""
     wanted = json.loads(request.fingerprint(rate))
     for planned in (True, False):
@@ -667,24 +721,33 @@ def _done(folder: Path, request: MotionRequest, retry_failed: bool,
         if not isinstance(document, dict) or document.get("request") != wanted:
             continue
         if not planned:
-            return MotionOutcome(request.id, OutcomeStatus.FAILED, error=document.get("error"),
-                                 wall_time=float(document.get("wall_time", 0.0)))
+            return MotionOutcome(
+                request.id,
+                OutcomeStatus.FAILED,
+                error=document.get("error"),
+                wall_time=float(document.get("wall_time", 0.0)),
+            )
         record = document.get("batch", {})
-        return MotionOutcome(request.id, OutcomeStatus.PLANNED, stop=record.get("status"),
-                             J=document.get("J"), te=document.get("duration"),
-                             iterations=record.get("iterations"),
-                             wall_time=float(record.get("wall_time", 0.0)),
-                             warnings=tuple(record.get("warnings", ())))
+        return MotionOutcome(
+            request.id,
+            OutcomeStatus.PLANNED,
+            stop=record.get("status"),
+            J=document.get("J"),
+            te=document.get("duration"),
+            iterations=record.get("iterations"),
+            wall_time=float(record.get("wall_time", 0.0)),
+            warnings=tuple(record.get("warnings", ())),
+        )
     return None
 
 
-def _write_summary(folder: Path, requests: Sequence[MotionRequest],
-                   outcomes: Mapping[str, MotionOutcome]) -> None:
+def _write_summary(
+    folder: Path, requests: Sequence[MotionRequest], outcomes: Mapping[str, MotionOutcome]
+) -> None:
     write_atomically(folder / "summary.csv", _summary_text(requests, outcomes))
 
 
-def _summary_text(requests: Sequence[MotionRequest],
-                  outcomes: Mapping[str, MotionOutcome]) -> str:
+def _summary_text(requests: Sequence[MotionRequest], outcomes: Mapping[str, MotionOutcome]) -> str:
     buffer = io.StringIO()
     writer = csv.DictWriter(buffer, SUMMARY_FIELDS, lineterminator="\n")
     writer.writeheader()
@@ -703,8 +766,10 @@ def progress_line(stream: Any = None) -> Callable[[int, int, int, int, float], N
         width = 24
         bar = "#" * round(width * done / max(total, 1))
         minutes, seconds = divmod(round(eta), 60)
-        line = (f"[{bar:<{width}}] {done}/{total} done, {failed} failed, {running} running, "
-                f"ETA {minutes}m{seconds:02d}s")
+        line = (
+            f"[{bar:<{width}}] {done}/{total} done, {failed} failed, {running} running, "
+            f"ETA {minutes}m{seconds:02d}s"
+        )
         print(("\r" + line) if tty else line, end="" if tty else "\n", file=stream, flush=True)
         if tty and done == total:
             print(file=stream)

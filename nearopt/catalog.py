@@ -54,12 +54,24 @@ _ERD_ARMS: dict[str, tuple[str, str, tuple[str, ...], str | None]] = {
         ("panda_finger_joint1", "panda_finger_joint2"),
         "panda_description/srdf/panda.srdf",
     ),
-    "xarm7": ("xarm_description/urdf/xarm7.urdf", "link_eef", (),
-              "xarm_description/srdf/xarm7.srdf"),
-    "z1": ("z1_description/urdf/z1.urdf", "gripperStator", ("jointGripper",),
-           "z1_description/srdf/z1.srdf"),
-    "kinova": ("kinova_description/robots/kinova.urdf", "j2s6s200_end_effector", (),
-               "kinova_description/srdf/kinova.srdf"),
+    "xarm7": (
+        "xarm_description/urdf/xarm7.urdf",
+        "link_eef",
+        (),
+        "xarm_description/srdf/xarm7.srdf",
+    ),
+    "z1": (
+        "z1_description/urdf/z1.urdf",
+        "gripperStator",
+        ("jointGripper",),
+        "z1_description/srdf/z1.srdf",
+    ),
+    "kinova": (
+        "kinova_description/robots/kinova.urdf",
+        "j2s6s200_end_effector",
+        (),
+        "kinova_description/srdf/kinova.srdf",
+    ),
     "so101": ("so_arm_description/urdf/so101.urdf", "gripper_frame_link", ("gripper",), None),
 }
 

@@ -54,12 +54,18 @@ _NEGATIVE_NUMBER = re.compile(
 class _Once(argparse._StoreAction):  # noqa: SLF001 - argparse's own store action
     """An option that may be given once: a second value is an error, not a silent override."""
 
-    def __call__(self, parser: argparse.ArgumentParser, namespace: argparse.Namespace,
-                 values: object, option_string: str | None = None) -> None:
+    def __call__(
+        self,
+        parser: argparse.ArgumentParser,
+        namespace: argparse.Namespace,
+        values: object,
+        option_string: str | None = None,
+    ) -> None:
         given = namespace.__dict__.setdefault("_given", set())
         if self.dest in given:
-            parser.error(f"{option_string} is given twice (options take one value list; "
-                         "--via repeats)")
+            parser.error(
+                f"{option_string} is given twice (options take one value list; --via repeats)"
+            )
         given.add(self.dest)
         super().__call__(parser, namespace, values, option_string)
 
@@ -91,100 +97,213 @@ def _parser() -> argparse.ArgumentParser:
     which = p.add_mutually_exclusive_group(required=True)
     which.add_argument("--robot", metavar="NAME", help="a known arm (see `nearopt robots`)")
     which.add_argument("--urdf", metavar="PATH", help="a URDF file")
-    p.add_argument("--lock", nargs="+", default=[], metavar="JOINT",
-                   help="joints of the URDF to hold fixed (e.g. gripper fingers)")
-    p.add_argument("--tip", metavar="LINK",
-                   help="plan for the chain of joints of the URDF that ends at this link (every "
-                        "other joint held fixed at 0 within its limits)")
+    p.add_argument(
+        "--lock",
+        nargs="+",
+        default=[],
+        metavar="JOINT",
+        help="joints of the URDF to hold fixed (e.g. gripper fingers)",
+    )
+    p.add_argument(
+        "--tip",
+        metavar="LINK",
+        help="plan for the chain of joints of the URDF that ends at this link (every "
+        "other joint held fixed at 0 within its limits)",
+    )
     p.add_argument("--base", metavar="LINK", help="the link that chain starts from (--tip)")
-    p.add_argument("--srdf", metavar="FILE",
-                   help="an SRDF of the URDF: its disabled collision pairs (and --group)")
-    p.add_argument("--group", metavar="NAME",
-                   help="plan for the joints of this SRDF group (a chain or a list of joints)")
-    p.add_argument("--lock-at", nargs="+", default=[], metavar="JOINT=VALUE",
-                   help="values [rad or m] at which locked joints are held (default 0 within "
-                        "their limits)")
-    p.add_argument("--effort-limit", nargs="+", type=float, metavar="U",
-                   help="actuator limits |u| <= U [N·m or N]: one value or one per joint "
-                        "(default: the URDF's)")
-    p.add_argument("--velocity-limit", nargs="+", type=float, metavar="V",
-                   help="joint speed limits [rad/s or m/s]: one value or one per joint")
-    p.add_argument("--velocity-scale", type=float, metavar="F",
-                   help="multiply every joint speed limit by F")
-    p.add_argument("--q0", nargs="+", type=float, metavar="V",
-                   help="start (required unless the --task file gives it; then this overrides it)")
+    p.add_argument(
+        "--srdf",
+        metavar="FILE",
+        help="an SRDF of the URDF: its disabled collision pairs (and --group)",
+    )
+    p.add_argument(
+        "--group",
+        metavar="NAME",
+        help="plan for the joints of this SRDF group (a chain or a list of joints)",
+    )
+    p.add_argument(
+        "--lock-at",
+        nargs="+",
+        default=[],
+        metavar="JOINT=VALUE",
+        help="values [rad or m] at which locked joints are held (default 0 within their limits)",
+    )
+    p.add_argument(
+        "--effort-limit",
+        nargs="+",
+        type=float,
+        metavar="U",
+        help="actuator limits |u| <= U [N·m or N]: one value or one per joint "
+        "(default: the URDF's)",
+    )
+    p.add_argument(
+        "--velocity-limit",
+        nargs="+",
+        type=float,
+        metavar="V",
+        help="joint speed limits [rad/s or m/s]: one value or one per joint",
+    )
+    p.add_argument(
+        "--velocity-scale", type=float, metavar="F", help="multiply every joint speed limit by F"
+    )
+    p.add_argument(
+        "--q0",
+        nargs="+",
+        type=float,
+        metavar="V",
+        help="start (required unless the --task file gives it; then this overrides it)",
+    )
     p.add_argument("--qe", nargs="+", type=float, metavar="V", help="goal")
-    p.add_argument("--goal-pose", nargs="+", type=float, metavar="X",
-                   help="goal as a tool pose instead of --qe: x y z [m] (position only) or "
-                        "x y z qx qy qz qw (base frame), reached by inverse kinematics")
-    p.add_argument("--frame", metavar="NAME",
-                   help="the frame --goal-pose places (default: the robot's tip)")
-    p.add_argument("--via", nargs="+", type=float, action="append", default=[], metavar="V",
-                   help="a via-point passed through without stopping (joint values, like --q0); "
-                        "repeat for several, in order")
-    p.add_argument("--task", metavar="FILE",
-                   help="a task (TOML): targets (joint values or tool poses) in order, each "
-                        "stopped at or passed through, planned as one motion (instead of --qe)")
-    p.add_argument("--fixed-goal", action="store_true",
-                   help="keep inverse kinematics' goal configuration (by default it moves along "
-                        "the pose with the path, to lower J)")
+    p.add_argument(
+        "--goal-pose",
+        nargs="+",
+        type=float,
+        metavar="X",
+        help="goal as a tool pose instead of --qe: x y z [m] (position only) or "
+        "x y z qx qy qz qw (base frame), reached by inverse kinematics",
+    )
+    p.add_argument(
+        "--frame", metavar="NAME", help="the frame --goal-pose places (default: the robot's tip)"
+    )
+    p.add_argument(
+        "--via",
+        nargs="+",
+        type=float,
+        action="append",
+        default=[],
+        metavar="V",
+        help="a via-point passed through without stopping (joint values, like --q0); "
+        "repeat for several, in order",
+    )
+    p.add_argument(
+        "--task",
+        metavar="FILE",
+        help="a task (TOML): targets (joint values or tool poses) in order, each "
+        "stopped at or passed through, planned as one motion (instead of --qe)",
+    )
+    p.add_argument(
+        "--fixed-goal",
+        action="store_true",
+        help="keep inverse kinematics' goal configuration (by default it moves along "
+        "the pose with the path, to lower J)",
+    )
     p.add_argument("--deg", action="store_true", help="q0 and qe are in degrees (default rad)")
     cost = p.add_mutually_exclusive_group()
     cost.add_argument("--beta", type=float, help="f0 = 1 + β Σ u² (the paper's eq. 32)")
-    cost.add_argument("--weights", nargs="+", type=float, metavar="W",
-                      help="f0 = 1 + Σ w_i u_i², one weight per joint")
+    cost.add_argument(
+        "--weights",
+        nargs="+",
+        type=float,
+        metavar="W",
+        help="f0 = 1 + Σ w_i u_i², one weight per joint",
+    )
     cost.add_argument("--time-optimal", action="store_true", help="f0 = 1 (the default)")
-    p.add_argument("--stage1-only", action="store_true",
-                   help="only time the straight joint line optimally (stage 1)")
+    p.add_argument(
+        "--stage1-only",
+        action="store_true",
+        help="only time the straight joint line optimally (stage 1)",
+    )
     p.add_argument("--method", choices=METHODS, default="scp", help="path update (scp)")
     p.add_argument("--grid", type=int, default=200, help="stage-1 grid segments (200)")
     p.add_argument("--max-iterations", type=int, default=200, help="iteration budget (200)")
-    p.add_argument("--time-limit", type=float, default=300.0,
-                   help="wall-time budget [s] (300; inf: none); the best plan so far is kept")
+    p.add_argument(
+        "--time-limit",
+        type=float,
+        default=300.0,
+        help="wall-time budget [s] (300; inf: none); the best plan so far is kept",
+    )
     p.add_argument("--no-velocity-limits", action="store_true", help="ignore joint speed limits")
-    p.add_argument("--acceleration-limit", nargs="+", type=float, metavar="A",
-                   help="joint acceleration limits |qdd| <= A [rad/s²]: one value for every joint "
-                        "or one per joint (default: none)")
-    p.add_argument("--no-position-limits", action="store_true",
-                   help="ignore joint position limits")
-    p.add_argument("--scene", metavar="FILE",
-                   help="obstacles (TOML): every link keeps the margin from them and from the "
-                        "other links along the whole motion")
-    p.add_argument("--margin", type=float, metavar="M",
-                   help="clearance kept [m] (default: the scene's, else 0.01)")
+    p.add_argument(
+        "--acceleration-limit",
+        nargs="+",
+        type=float,
+        metavar="A",
+        help="joint acceleration limits |qdd| <= A [rad/s²]: one value for every joint "
+        "or one per joint (default: none)",
+    )
+    p.add_argument("--no-position-limits", action="store_true", help="ignore joint position limits")
+    p.add_argument(
+        "--scene",
+        metavar="FILE",
+        help="obstacles (TOML): every link keeps the margin from them and from the "
+        "other links along the whole motion",
+    )
+    p.add_argument(
+        "--margin",
+        type=float,
+        metavar="M",
+        help="clearance kept [m] (default: the scene's, else 0.01)",
+    )
     selfc = p.add_mutually_exclusive_group()
-    selfc.add_argument("--self-collision", action="store_true", default=None,
-                       help="keep the links apart (the default with --scene)")
-    selfc.add_argument("--no-self-collision", dest="self_collision", action="store_false",
-                       help="do not check the links against each other")
-    p.add_argument("--json", metavar="FILE",
-                   help="write the planned motion as JSON (- for the standard output)")
+    selfc.add_argument(
+        "--self-collision",
+        action="store_true",
+        default=None,
+        help="keep the links apart (the default with --scene)",
+    )
+    selfc.add_argument(
+        "--no-self-collision",
+        dest="self_collision",
+        action="store_false",
+        help="do not check the links against each other",
+    )
+    p.add_argument(
+        "--json",
+        metavar="FILE",
+        help="write the planned motion as JSON (- for the standard output)",
+    )
     p.add_argument("--csv", metavar="FILE", help="write the same samples as CSV (- likewise)")
     p.add_argument("--rate", type=float, default=1000.0, help="JSON/CSV sampling rate [Hz] (1000)")
-    p.add_argument("--plots", metavar="DIR",
-                   help="write torques.png, speeds.png, workspace.png, history.png")
+    p.add_argument(
+        "--plots", metavar="DIR", help="write torques.png, speeds.png, workspace.png, history.png"
+    )
     p.add_argument("--html", metavar="FILE", help="write the animation as a standalone HTML file")
-    p.add_argument("--verify", action="store_true",
-                   help="print the verification report (every plan is verified before output)")
-    p.add_argument("--show", action="store_true",
-                   help="play it in the browser (meshcat server on 127.0.0.1) until Ctrl+C")
+    p.add_argument(
+        "--verify",
+        action="store_true",
+        help="print the verification report (every plan is verified before output)",
+    )
+    p.add_argument(
+        "--show",
+        action="store_true",
+        help="play it in the browser (meshcat server on 127.0.0.1) until Ctrl+C",
+    )
     p.add_argument("--quiet", action="store_true", help="no per-iteration output")
-    b = sub.add_parser("batch", help="plan many motions (JSON Lines) on this machine's cores or "
-                                     "on a Dask cluster")
-    b.add_argument("tasks", metavar="TASKS",
-                   help="motions, one JSON object per line: id and the long options of "
-                        "`nearopt plan` without dashes ('-' as '_')")
-    b.add_argument("--out", required=True, metavar="DIR",
-                   help="write DIR/<id>.json per motion and DIR/summary.csv")
+    b = sub.add_parser(
+        "batch", help="plan many motions (JSON Lines) on this machine's cores or on a Dask cluster"
+    )
+    b.add_argument(
+        "tasks",
+        metavar="TASKS",
+        help="motions, one JSON object per line: id and the long options of "
+        "`nearopt plan` without dashes ('-' as '_')",
+    )
+    b.add_argument(
+        "--out",
+        required=True,
+        metavar="DIR",
+        help="write DIR/<id>.json per motion and DIR/summary.csv",
+    )
     where = b.add_mutually_exclusive_group()
-    where.add_argument("--workers", type=int, metavar="N",
-                       help="worker processes on this machine (default: one per core)")
-    where.add_argument("--scheduler", metavar="ADDRESS",
-                       help="a dask.distributed scheduler, e.g. tcp://10.0.0.5:8786")
-    b.add_argument("--rate", type=float, default=1000.0,
-                   help="the JSON files' sampling rate [Hz] (1000)")
-    b.add_argument("--retry-failed", action="store_true",
-                   help="plan again the motions an earlier run recorded as failed")
+    where.add_argument(
+        "--workers",
+        type=int,
+        metavar="N",
+        help="worker processes on this machine (default: one per core)",
+    )
+    where.add_argument(
+        "--scheduler",
+        metavar="ADDRESS",
+        help="a dask.distributed scheduler, e.g. tcp://10.0.0.5:8786",
+    )
+    b.add_argument(
+        "--rate", type=float, default=1000.0, help="the JSON files' sampling rate [Hz] (1000)"
+    )
+    b.add_argument(
+        "--retry-failed",
+        action="store_true",
+        help="plan again the motions an earlier run recorded as failed",
+    )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
     return parser
 
@@ -222,11 +341,13 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
         try:
             import matplotlib  # noqa: F401
         except ImportError:
-            raise ConfigurationError("--plots needs matplotlib: pip install 'nearopt[viz]'"
-                                     ) from None
+            raise ConfigurationError(
+                "--plots needs matplotlib: pip install 'nearopt[viz]'"
+            ) from None
     # every output is checked before planning, so that a bad path costs no planning time
-    roles = {f"--{key}": getattr(args, key) for key in ("json", "csv", "html")
-             if getattr(args, key)}
+    roles = {
+        f"--{key}": getattr(args, key) for key in ("json", "csv", "html") if getattr(args, key)
+    }
     plots = _plots_folder(args.plots) if args.plots else None
     if plots is not None and plots.is_dir():
         roles.update({f"--plots {name}": plots / name for name in FIGURE_NAMES})
@@ -243,29 +364,44 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
         print(f"segment {k + 1}  {_format(entry)}", file=out, flush=True)
 
     with interrupt.armed():
-        result = solve(prepared, None if quiet else progress,
-                       None if quiet else segment_progress)
+        result = solve(prepared, None if quiet else progress, None if quiet else segment_progress)
     if isinstance(result, TaskResult):
-        print(f"{result.status}: J = {result.J:.6f} (first paths {result.initial_J:.6f}), "
-              f"te = {result.duration:.4f} s, {len(result.segments)} "
-              f"segment{'s' if len(result.segments) > 1 else ''}, "
-              f"{result.wall_time:.2f} s", file=out)
-        for k, (t0, seg, reached) in enumerate(zip(result.trajectory.starts, result.segments,
-                                                   result.segment_targets, strict=True)):
+        print(
+            f"{result.status}: J = {result.J:.6f} (first paths {result.initial_J:.6f}), "
+            f"te = {result.duration:.4f} s, {len(result.segments)} "
+            f"segment{'s' if len(result.segments) > 1 else ''}, "
+            f"{result.wall_time:.2f} s",
+            file=out,
+        )
+        for k, (t0, seg, reached) in enumerate(
+            zip(result.trajectory.starts, result.segments, result.segment_targets, strict=True)
+        ):
             to = ", ".join(t.name for t in reached)
-            print(f"  segment {k + 1} (to {to}): t = {t0:.4f}-{t0 + seg.duration:.4f} s, "
-                  f"J = {seg.J:.6f}, {len(seg.history) - 1} iterations, {seg.status} "
-                  f"({seg.message})", file=out)
+            print(
+                f"  segment {k + 1} (to {to}): t = {t0:.4f}-{t0 + seg.duration:.4f} s, "
+                f"J = {seg.J:.6f}, {len(seg.history) - 1} iterations, {seg.status} "
+                f"({seg.message})",
+                file=out,
+            )
     else:
-        first = "straight line" if isinstance(result.initial.trajectory.path, StraightPath) else (
-            "first path, from OMPL")
-        print(f"{result.status}: J = {result.J:.6f} ({first} {result.initial.J:.6f}), "
-              f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
-              f"{result.wall_time:.2f} s ({result.message})", file=out)
+        first = (
+            "straight line"
+            if isinstance(result.initial.trajectory.path, StraightPath)
+            else ("first path, from OMPL")
+        )
+        print(
+            f"{result.status}: J = {result.J:.6f} ({first} {result.initial.J:.6f}), "
+            f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "
+            f"{result.wall_time:.2f} s ({result.message})",
+            file=out,
+        )
     if result.clearance is not None:
         c = result.clearance
-        print(f"clearance: closest {c.closest.pair} {c.closest.distance * 1e3:.1f} mm "
-              f"(margin {c.level * 1e3:.1f} mm, certified along the whole path)", file=out)
+        print(
+            f"clearance: closest {c.closest.pair} {c.closest.distance * 1e3:.1f} mm "
+            f"(margin {c.level * 1e3:.1f} mm, certified along the whole path)",
+            file=out,
+        )
     report = check(result, prepared)
     if args.verify:
         print(report, file=out)
@@ -287,8 +423,12 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
 
         rendered = render_figures(result)
         plots.mkdir(exist_ok=True)
-        contents.update({outputs.get(f"--plots {name}") or resolve_output(plots / name): png
-                         for name, png in rendered.items()})
+        contents.update(
+            {
+                outputs.get(f"--plots {name}") or resolve_output(plots / name): png
+                for name, png in rendered.items()
+            }
+        )
     for name in write_outputs(contents):
         print(f"wrote {name}", file=out)
     for message in dict.fromkeys(str(w.message) for w in caught):  # after success only
@@ -298,8 +438,11 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
 
         signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C ends the show
         with show(result) as viewer:
-            print(f"playing at {viewer.url} (meshcat on 127.0.0.1 only); Ctrl+C stops it",
-                  file=out, flush=True)
+            print(
+                f"playing at {viewer.url} (meshcat on 127.0.0.1 only); Ctrl+C stops it",
+                file=out,
+                flush=True,
+            )
             try:
                 while True:
                     time.sleep(1.0)
@@ -324,13 +467,20 @@ def _batch_command(args: argparse.Namespace) -> int:
     signal.signal(signal.SIGINT, signal.default_int_handler)
     t0 = time.perf_counter()
     summary = run_batch(
-        requests, args.out, args.scheduler, workers=args.workers, rate=args.rate,
-        retry_failed=args.retry_failed, progress=None if args.quiet else progress_line(),
+        requests,
+        args.out,
+        args.scheduler,
+        workers=args.workers,
+        rate=args.rate,
+        retry_failed=args.retry_failed,
+        progress=None if args.quiet else progress_line(),
     )
     planned = len(summary.outcomes) - summary.failed
-    print(f"{len(requests)} motions: {planned} planned, {summary.failed} failed"
-          + (f" ({summary.skipped} done before, skipped)" if summary.skipped else "")
-          + f", {time.perf_counter() - t0:.1f} s; wrote {Path(args.out) / 'summary.csv'}")
+    print(
+        f"{len(requests)} motions: {planned} planned, {summary.failed} failed"
+        + (f" ({summary.skipped} done before, skipped)" if summary.skipped else "")
+        + f", {time.perf_counter() - t0:.1f} s; wrote {Path(args.out) / 'summary.csv'}"
+    )
     for outcome in summary.outcomes:
         if outcome.error:
             print(f"  {outcome.id}: {outcome.error}", file=sys.stderr)
@@ -358,8 +508,10 @@ def _plots_folder(target: str) -> Path:
 
 def _format(entry: Iteration) -> str:
     step = "" if entry.alpha is None else f"{entry.alpha:.3g}"
-    return (f"iteration {entry.index:3d}  J = {entry.J:.6f}  step = {step:>8}  "
-            f"te = {entry.duration:.4f} s  {entry.wall_time:7.2f} s")
+    return (
+        f"iteration {entry.index:3d}  J = {entry.J:.6f}  step = {step:>8}  "
+        f"te = {entry.duration:.4f} s  {entry.wall_time:7.2f} s"
+    )
 
 
 class _Interrupt:
@@ -411,8 +563,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         _fail(f"cannot write {exc.filename or 'an output file'}: {exc.strerror or exc}")
     except KeyboardInterrupt:
         if args is not None and args.command == "batch":
-            _fail("interrupted: the motions written so far are kept (run it again to go on)",
-                  code=130)
+            _fail(
+                "interrupted: the motions written so far are kept (run it again to go on)", code=130
+            )
         _fail("interrupted before a plan was found; nothing written", code=130)
     except _Abort:
         _fail("aborted by a second Ctrl-C; nothing written", code=130)

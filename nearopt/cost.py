@@ -22,12 +22,14 @@ if TYPE_CHECKING:
 
 __all__ = ["Cost", "TimeCost", "TorqueCost", "CallableCost", "check_cost"]
 
+
 @runtime_checkable
 class Cost(Protocol):
     """A running cost f0(θ, θ̇, u) ≥ 0 [1/s · s = dimensionless per second of motion]."""
 
-    def __call__(self, q: NDArray[np.float64], qd: NDArray[np.float64], u: NDArray[np.float64]
-                 ) -> NDArray[np.float64]:
+    def __call__(
+        self, q: NDArray[np.float64], qd: NDArray[np.float64], u: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
         """f0 at N samples, shape (N,)."""
 
     def gradients(
@@ -37,6 +39,7 @@ class Cost(Protocol):
 
     def describe(self) -> str:
         """A short text for tables and JSON output."""
+
 
 class TorqueCost:
     """f0 = 1 + Σ_i w_i u_i²: time plus weighted squared torques (eq. 32 with w_i = β).
@@ -68,8 +71,9 @@ class TorqueCost:
             raise ConfigurationError(f"the cost has {self._w.size} weights for {n} joints")
         return self._w.copy()
 
-    def __call__(self, q: NDArray[np.float64], qd: NDArray[np.float64], u: NDArray[np.float64]
-                 ) -> NDArray[np.float64]:
+    def __call__(
+        self, q: NDArray[np.float64], qd: NDArray[np.float64], u: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
         return 1.0 + np.sum(self.torque_weights(u.shape[1]) * u**2, axis=1)
 
     def gradients(
@@ -83,6 +87,7 @@ class TorqueCost:
             return f"time + {self.beta:g}·Σu²"
         return f"time + Σ w_i u_i², w = {self._w.tolist()}"
 
+
 class TimeCost(TorqueCost):
     """f0 = 1: the duration of the motion (time-optimal planning)."""
 
@@ -91,6 +96,7 @@ class TimeCost(TorqueCost):
 
     def describe(self) -> str:
         return "time"
+
 
 class CallableCost:
     """A user-supplied running cost f0(θ, θ̇, u), with its gradients or finite differences.
@@ -124,8 +130,9 @@ class CallableCost:
         self.name = name
         self.eps = float(eps)
 
-    def __call__(self, q: NDArray[np.float64], qd: NDArray[np.float64], u: NDArray[np.float64]
-                 ) -> NDArray[np.float64]:
+    def __call__(
+        self, q: NDArray[np.float64], qd: NDArray[np.float64], u: NDArray[np.float64]
+    ) -> NDArray[np.float64]:
         try:
             value = np.asarray(self._f0(q, qd, u), dtype=float).reshape(-1)
         except NearoptError:

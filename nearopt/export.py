@@ -50,8 +50,9 @@ def check_sampling(result: PlanResult | TaskResult, rate: float) -> str | None:
     return message
 
 
-def json_text(result: PlanResult | TaskResult, rate: float = 1000.0,
-              extra: dict[str, object] | None = None) -> str:
+def json_text(
+    result: PlanResult | TaskResult, rate: float = 1000.0, extra: dict[str, object] | None = None
+) -> str:
     """The plan as ``{"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
     "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists), and ``"via": [{"t",
     "q"}, …]`` when the motion passes via-points.
@@ -82,23 +83,38 @@ def json_text(result: PlanResult | TaskResult, rate: float = 1000.0,
     if segments is None:
         document["history"] = [{"J": it.J, "alpha": it.alpha} for it in result.history]
         if result.via:  # where the motion passes its via-points
-            document["via"] = [{"t": float(t), "q": q.tolist()}
-                               for t, q in zip(result.via_times, result.via, strict=True)]
+            document["via"] = [
+                {"t": float(t), "q": q.tolist()}
+                for t, q in zip(result.via_times, result.via, strict=True)
+            ]
         return json.dumps(document)
     document["targets"] = [
-        {"name": target.name, "t": float(t), "q": q.tolist(), "stop": target.stop,
-         "pose": _pose(target.goal),
-         "frame": (target.goal.frame or result.robot.tip) if isinstance(target.goal, ToolPose)
-         else None}
-        for target, t, q in zip(result.targets, result.target_times,
-                                result.target_configurations, strict=True)
+        {
+            "name": target.name,
+            "t": float(t),
+            "q": q.tolist(),
+            "stop": target.stop,
+            "pose": _pose(target.goal),
+            "frame": (target.goal.frame or result.robot.tip)
+            if isinstance(target.goal, ToolPose)
+            else None,
+        }
+        for target, t, q in zip(
+            result.targets, result.target_times, result.target_configurations, strict=True
+        )
     ]
     document["segments"] = [
-        {"t_start": float(t0), "t_end": float(t0 + seg.duration), "J": seg.J,
-         "status": str(seg.status), "targets": [t.name for t in reached],
-         "history": [{"J": it.J, "alpha": it.alpha} for it in seg.history]}
-        for t0, seg, reached in zip(result.trajectory.starts, segments, result.segment_targets,
-                                    strict=True)
+        {
+            "t_start": float(t0),
+            "t_end": float(t0 + seg.duration),
+            "J": seg.J,
+            "status": str(seg.status),
+            "targets": [t.name for t in reached],
+            "history": [{"J": it.J, "alpha": it.alpha} for it in seg.history],
+        }
+        for t0, seg, reached in zip(
+            result.trajectory.starts, segments, result.segment_targets, strict=True
+        )
     ]
     return json.dumps(document)
 
@@ -131,8 +147,9 @@ def csv_text(result: PlanResult | TaskResult, rate: float = 1000.0) -> str:
     else:
         part = result.trajectory.part_at(samples.t) + 1
         writer.writerow([*header, "segment"])
-        writer.writerows([*(repr(float(x)) for x in row), str(k)]
-                         for row, k in zip(rows, part, strict=True))
+        writer.writerows(
+            [*(repr(float(x)) for x in row), str(k)] for row, k in zip(rows, part, strict=True)
+        )
     return buffer.getvalue()
 
 

@@ -11,8 +11,9 @@ from .errors import ConfigurationError
 __all__ = ["read_toml"]
 
 
-def read_toml(path: object, error: type[ConfigurationError], what: str
-              ) -> tuple[Path, dict[str, Any]]:
+def read_toml(
+    path: object, error: type[ConfigurationError], what: str
+) -> tuple[Path, dict[str, Any]]:
     """The absolute path of a TOML file and its contents (a leading byte-order mark allowed).
 
     Raises

@@ -147,8 +147,11 @@ def inverse_kinematics(
     starts = [] if seed is None else [robot.check_configuration(seed, "seed")]
     best: tuple[float, NDArray[np.float64]] | None = None
     for k in range(attempts):
-        q = np.clip(starts[k] if k < len(starts) else rng.uniform(lower, upper),
-                    lim.position_lower, lim.position_upper)
+        q = np.clip(
+            starts[k] if k < len(starts) else rng.uniform(lower, upper),
+            lim.position_lower,
+            lim.position_upper,
+        )
         damping = 1e-3
         for _ in range(iterations):
             err, jac = _error(model, data, fid, q, target, full)
@@ -172,13 +175,19 @@ def inverse_kinematics(
         f"{robot.name} cannot put {where} at {list(pose.position)}"
         + (f" with orientation {list(pose.quaternion)}" if full else "")
         + f" within its joint limits: the closest placement found is {distance:.4g} m"
-        + (f" and {angle:.4g} rad" if full else "") + " away",
-        distance=distance, angle=angle,
+        + (f" and {angle:.4g} rad" if full else "")
+        + " away",
+        distance=distance,
+        angle=angle,
     )
 
 
 def _error(
-    model: pin.Model, data: pin.Data, fid: int, q: NDArray[np.float64], target: pin.SE3,
+    model: pin.Model,
+    data: pin.Data,
+    fid: int,
+    q: NDArray[np.float64],
+    target: pin.SE3,
     full: bool,
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """The placement error e and de/dθ (so that θ + Δθ with J Δθ = e reduces it)."""

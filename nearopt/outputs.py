@@ -33,8 +33,15 @@ from .errors import ConfigurationError
 if TYPE_CHECKING:
     from collections.abc import Iterator
 
-__all__ = ["OutputKind", "Output", "resolve_output", "check_outputs", "write_outputs",
-           "make_folder", "write_atomically"]
+__all__ = [
+    "OutputKind",
+    "Output",
+    "resolve_output",
+    "check_outputs",
+    "write_outputs",
+    "make_folder",
+    "write_atomically",
+]
 
 
 class OutputKind(Enum):
@@ -153,16 +160,16 @@ def write_outputs(contents: dict[Output, str | bytes]) -> list[str]:
     staged: list[tuple[str, Output]] = []
     umask = os.umask(0)
     os.umask(umask)
-    data = {output: (c.encode("utf-8") if isinstance(c, str) else c)
-            for output, c in contents.items()}
+    data = {
+        output: (c.encode("utf-8") if isinstance(c, str) else c) for output, c in contents.items()
+    }
     try:
         for output, content in data.items():
             if output.kind is not OutputKind.FILE:
                 continue
             path = output.path
             try:
-                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.",
-                                           suffix=".tmp")
+                fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
                 staged.append((tmp, output))
                 with os.fdopen(fd, "wb") as handle:
                     handle.write(content)

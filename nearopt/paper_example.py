@@ -52,8 +52,9 @@ class ArmParameters:
     torque_limits: tuple[float, float]
 
 
-TABLE_1 = ArmParameters(inertia=4.167e-3, mass=1.0, half_length=0.1, gravity=9.81,
-                        torque_limits=(10.0, 5.0))
+TABLE_1 = ArmParameters(
+    inertia=4.167e-3, mass=1.0, half_length=0.1, gravity=9.81, torque_limits=(10.0, 5.0)
+)
 
 
 @dataclass(frozen=True)

@@ -191,8 +191,12 @@ class BSplinePath:
             inner = np.linspace(0.0, 1.0, count - k + 1)[1:-1]
         else:
             inner = np.asarray(breaks, dtype=float).ravel()
-            if (inner.size != count - k - 1 or np.any(np.diff(inner) <= 0)
-                    or np.any(inner <= 0.0) or np.any(inner >= 1.0)):
+            if (
+                inner.size != count - k - 1
+                or np.any(np.diff(inner) <= 0)
+                or np.any(inner <= 0.0)
+                or np.any(inner >= 1.0)
+            ):
                 raise ConfigurationError(
                     f"breaks must be {count - k - 1} increasing values in (0, 1) for {count} "
                     f"control points, got {inner.tolist()}"

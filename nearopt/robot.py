@@ -225,7 +225,11 @@ class Robot:
             raise URDFError(f"the SRDF {srdf} does not exist", path=str(srdf))
         arm = read_urdf(path, tuple(locked_joints), tip, base, srdf if group else None, group)
         robot_name, xml, continuous, no_effort, locked = (
-            arm.name, arm.xml, arm.continuous, arm.no_effort, arm.locked
+            arm.name,
+            arm.xml,
+            arm.continuous,
+            arm.no_effort,
+            arm.locked,
         )
         if no_effort and effort_limit is None:
             raise URDFError(
@@ -245,8 +249,9 @@ class Robot:
                     "revolute and prismatic joints are supported",
                     path=str(path),
                 )
-        q_ref = _lock_reference(full, path, dict(zip(arm.locked, arm.locked_in_xml, strict=True)),
-                                lock_at or {})
+        q_ref = _lock_reference(
+            full, path, dict(zip(arm.locked, arm.locked_in_xml, strict=True)), lock_at or {}
+        )
         ids = [full.getJointId(j) for j in arm.locked_in_xml]
         model = pin.buildReducedModel(full, ids, q_ref) if ids else full
         names = list(model.names)[1:]
@@ -312,8 +317,12 @@ class Robot:
             For an unknown name; the message lists the known ones.
         """
         entry = catalog.robot_entry(name)
-        kwargs = {"tip": entry.tip, "locked_joints": entry.locked_joints, "name": entry.name,
-                  "srdf": entry.srdf}
+        kwargs = {
+            "tip": entry.tip,
+            "locked_joints": entry.locked_joints,
+            "name": entry.name,
+            "srdf": entry.srdf,
+        }
         kwargs.update(overrides)
         return cls.from_urdf(entry.urdf, **kwargs)  # type: ignore[arg-type]
 
@@ -498,8 +507,14 @@ class Robot:
         if self._pool is None:
             self._pool = pin.ModelPool(self._model, 1)
         tau = np.zeros((self.n, count), order="F")
-        pin.rneaInParallel(1, self._pool, np.asfortranarray(q.T), np.asfortranarray(qd.T),
-                           np.asfortranarray(qdd.T), tau)
+        pin.rneaInParallel(
+            1,
+            self._pool,
+            np.asfortranarray(q.T),
+            np.asfortranarray(qd.T),
+            np.asfortranarray(qdd.T),
+            tau,
+        )
         return tau.T
 
     def forward_dynamics(self, q: ArrayLike, qd: ArrayLike, u: ArrayLike) -> NDArray[np.float64]:
@@ -564,8 +579,11 @@ class Robot:
         self._check_batch(theta, dtheta, ddtheta)
         zero = np.zeros_like(dtheta)
         g, c, m = np.split(
-            self._rnea_columns(np.vstack([theta, theta, theta]), np.vstack([zero, dtheta, zero]),
-                               np.vstack([zero, ddtheta, dtheta])),
+            self._rnea_columns(
+                np.vstack([theta, theta, theta]),
+                np.vstack([zero, dtheta, zero]),
+                np.vstack([zero, ddtheta, dtheta]),
+            ),
             3,
         )
         return PathCoefficients(m - g, c - g, self.damping * dtheta, g)
@@ -779,7 +797,8 @@ def _lock_reference(
         if name not in locked:
             raise ConfigurationError(
                 f"lock_at names joint {name!r}, which is not locked (locked: "
-                f"{', '.join(locked) or 'none'})", joint=name,
+                f"{', '.join(locked) or 'none'})",
+                joint=name,
             )
         jid = full.getJointId(locked[name])
         k = full.idx_qs[jid]
@@ -801,8 +820,9 @@ def _frame_id(model: pin.Model, frame: str, robot: str) -> int:
     if model.existFrame(frame):
         return model.getFrameId(frame)
     links = [f.name for f in model.frames if f.type == pin.FrameType.BODY]
-    raise ConfigurationError(f"robot {robot!r} has no frame {frame!r}; its links: "
-                             f"{', '.join(links)}")
+    raise ConfigurationError(
+        f"robot {robot!r} has no frame {frame!r}; its links: {', '.join(links)}"
+    )
 
 
 def _default_tip(model: pin.Model) -> str:

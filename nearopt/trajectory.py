@@ -27,8 +27,9 @@ if TYPE_CHECKING:
 
 __all__ = ["Motion", "Trajectory", "ChainedTrajectory", "Samples", "segment_times"]
 
-InverseDynamics = Callable[["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"],
-                           "NDArray[np.float64]"]
+InverseDynamics = Callable[
+    ["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"], "NDArray[np.float64]"
+]
 
 
 @dataclass(frozen=True)
@@ -134,9 +135,7 @@ class Motion:
         """The sampling rate [Hz] below which samples can miss a phase: 1 / the shortest phase."""
         return float(1.0 / np.min(self.phases(threshold)))
 
-    def integrate(
-        self, f0: Callable[..., NDArray[np.float64]], tolerance: float = 1e-10
-    ) -> float:
+    def integrate(self, f0: Callable[..., NDArray[np.float64]], tolerance: float = 1e-10) -> float:
         """∫ f0(θ, θ̇, u) dt over the motion, by adaptive Gauss-Kronrod quadrature.
 
         Every segment of the timing (where the motion is smooth) gets a 7/15-point Gauss-Kronrod
@@ -245,7 +244,6 @@ class Trajectory(Motion):
         return self.path(s, 0), d1 * sd[:, None], qdd
 
 
-
 class ChainedTrajectory(Motion):
     """Motions one after another, each from rest to rest: the whole motion of a task whose
     targets the arm stops at (:func:`~nearopt.plan_task`).
@@ -284,8 +282,9 @@ class ChainedTrajectory(Motion):
         self._dof = int(parts[0](0.0, 0).shape[1])
         durations = np.array([p.duration for p in parts])
         self.starts = np.concatenate([[0.0], np.cumsum(durations)[:-1]])
-        self.t = np.unique(np.concatenate([p.t + t0 for p, t0 in zip(parts, self.starts,
-                                                                      strict=True)]))
+        self.t = np.unique(
+            np.concatenate([p.t + t0 for p, t0 in zip(parts, self.starts, strict=True)])
+        )
         self._inverse_dynamics = parts[0]._inverse_dynamics
         for arr in (self.starts, self.t):
             arr.setflags(write=False)
@@ -308,24 +307,51 @@ class ChainedTrajectory(Motion):
         out = tuple(np.empty((t.size, self.dof)) for _ in range(3))
         for index in np.unique(k):
             mask = k == index
-            for array, value in zip(out, self.parts[index].states(t[mask] - self.starts[index]),
-                                    strict=True):
+            for array, value in zip(
+                out, self.parts[index].states(t[mask] - self.starts[index]), strict=True
+            ):
                 array[mask] = value
         return out
 
 
 # Gauss-Kronrod 7/15 on [-1, 1] (QUADPACK's qk15): Kronrod nodes and weights, and the weights of
 # the 7-point Gauss rule on its nodes (every second Kronrod node)
-_X = np.array([0.991455371120812639206854697526329, 0.949107912342758524526189684047851,
-               0.864864423359769072789712788640926, 0.741531185599394439863864773280788,
-               0.586087235467691130294144845693013, 0.405845151377397166906606412076961,
-               0.207784955007898467600689403773245, 0.0])
-_WK = np.array([0.022935322010529224963732008058970, 0.063092092629978553290700663189204,
-                0.104790010322250183839876322541518, 0.140653259715525918745189590510238,
-                0.169004726639267902826583426598550, 0.190350578064785409913256402421014,
-                0.204432940075298892414161999234649, 0.209482141084727828012999174891714])
-_WG = np.array([0.0, 0.129484966168869693270611432679082, 0.0, 0.279705391489276667901467771423780,
-                0.0, 0.381830050505118944950369775488975, 0.0, 0.417959183673469387755102040816327])
+_X = np.array(
+    [
+        0.991455371120812639206854697526329,
+        0.949107912342758524526189684047851,
+        0.864864423359769072789712788640926,
+        0.741531185599394439863864773280788,
+        0.586087235467691130294144845693013,
+        0.405845151377397166906606412076961,
+        0.207784955007898467600689403773245,
+        0.0,
+    ]
+)
+_WK = np.array(
+    [
+        0.022935322010529224963732008058970,
+        0.063092092629978553290700663189204,
+        0.104790010322250183839876322541518,
+        0.140653259715525918745189590510238,
+        0.169004726639267902826583426598550,
+        0.190350578064785409913256402421014,
+        0.204432940075298892414161999234649,
+        0.209482141084727828012999174891714,
+    ]
+)
+_WG = np.array(
+    [
+        0.0,
+        0.129484966168869693270611432679082,
+        0.0,
+        0.279705391489276667901467771423780,
+        0.0,
+        0.381830050505118944950369775488975,
+        0.0,
+        0.417959183673469387755102040816327,
+    ]
+)
 _KRONROD_X = np.concatenate([-_X[:-1], _X[::-1]])
 _KRONROD_W = np.concatenate([_WK[:-1], _WK[::-1]])
 _GAUSS_W = np.concatenate([_WG[:-1], _WG[::-1]])

@@ -97,8 +97,11 @@ def _check_numbers(root: ET.Element, path: Path) -> None:
         for element in root.iter(tag):
             for attribute in attributes:
                 if element.get(attribute) is not None:
-                    _floats(element.get(attribute), path,
-                            f"<{tag} {attribute}> of {_owner(element, parents)}")
+                    _floats(
+                        element.get(attribute),
+                        path,
+                        f"<{tag} {attribute}> of {_owner(element, parents)}",
+                    )
 
 
 def _moved_links(root: ET.Element, locked: tuple[str, ...]) -> set[str]:
@@ -108,8 +111,11 @@ def _moved_links(root: ET.Element, locked: tuple[str, ...]) -> set[str]:
         children.setdefault(joint.find("parent").get("link"), []).append(joint)
     moved: set[str] = set()
     parents = {j.find("child").get("link") for j in root.findall("joint")}
-    frontier = [(link.get("name"), False) for link in root.findall("link")
-                if link.get("name") not in parents]
+    frontier = [
+        (link.get("name"), False)
+        for link in root.findall("link")
+        if link.get("name") not in parents
+    ]
     while frontier:
         link, moving = frontier.pop()
         if moving:
@@ -136,19 +142,30 @@ def _check_inertials(root: ET.Element, path: Path, moved: set[str]) -> None:
         if inertia is None:
             continue
         v = {k: float(inertia.get(k, "0")) for k in _NUMBERS["inertia"]}
-        matrix = np.array([[v["ixx"], v["ixy"], v["ixz"]], [v["ixy"], v["iyy"], v["iyz"]],
-                           [v["ixz"], v["iyz"], v["izz"]]])
+        matrix = np.array(
+            [
+                [v["ixx"], v["ixy"], v["ixz"]],
+                [v["ixy"], v["iyy"], v["iyz"]],
+                [v["ixz"], v["iyz"], v["izz"]],
+            ]
+        )
         moments = np.linalg.eigvalsh(matrix)
         scale = float(np.max(np.abs(moments)))
         slack = 1e-9 * scale + 1e-12  # [kg·m²] rounding; a point mass has no inertia at all
         if moments[0] < -slack:
-            raise _error(path, f"link {name!r} has an inertia that is not positive "
-                               f"semi-definite: principal moments {np.round(moments, 9).tolist()}"
-                               " kg·m²")
+            raise _error(
+                path,
+                f"link {name!r} has an inertia that is not positive "
+                f"semi-definite: principal moments {np.round(moments, 9).tolist()}"
+                " kg·m²",
+            )
         if moments[0] + moments[1] < moments[2] - 1e-6 * scale - 1e-12:
-            raise _error(path, f"link {name!r} has principal moments of inertia "
-                               f"{np.round(moments, 9).tolist()} kg·m² that break the triangle "
-                               "inequality I1 + I2 ≥ I3 (no rigid body has them)")
+            raise _error(
+                path,
+                f"link {name!r} has principal moments of inertia "
+                f"{np.round(moments, 9).tolist()} kg·m² that break the triangle "
+                "inequality I1 + I2 ≥ I3 (no rigid body has them)",
+            )
 
 
 def _check_tree(root: ET.Element, path: Path) -> dict[str, ET.Element]:
@@ -175,13 +192,18 @@ def _check_tree(root: ET.Element, path: Path) -> dict[str, ET.Element]:
             element = joint.find(end)
             link = None if element is None else element.get("link")
             if link not in known:
-                raise _error(path, f"joint {name!r} has {end} link {link!r}, which is not a "
-                                   "<link> of the robot")
+                raise _error(
+                    path,
+                    f"joint {name!r} has {end} link {link!r}, which is not a <link> of the robot",
+                )
             ends.append(link)
         parent, child = ends
         if child in parent_of:
-            raise _error(path, f"link {child!r} is the child of two joints, {parent_of[child]!r} "
-                               f"and {name!r}: a kinematic loop (URDF describes trees)")
+            raise _error(
+                path,
+                f"link {child!r} is the child of two joints, {parent_of[child]!r} "
+                f"and {name!r}: a kinematic loop (URDF describes trees)",
+            )
         parent_of[child] = name
     roots = [link for link in links if link not in parent_of]
     if not roots:
@@ -190,7 +212,8 @@ def _check_tree(root: ET.Element, path: Path) -> dict[str, ET.Element]:
     children: dict[str, list[str]] = {}
     for joint in joints:
         children.setdefault(joint.find("parent").get("link"), []).append(
-            joint.find("child").get("link"))
+            joint.find("child").get("link")
+        )
     while frontier:
         for child in children.get(frontier.pop(), []):
             if child not in reached:
@@ -200,14 +223,15 @@ def _check_tree(root: ET.Element, path: Path) -> dict[str, ET.Element]:
     if loop:
         raise _error(path, f"links {loop} form a kinematic loop: no root link reaches them")
     if len(roots) > 1:
-        raise _error(path, f"the robot has {len(roots)} root links ({', '.join(roots)}): its "
-                           "links are not connected by joints into one tree")
+        raise _error(
+            path,
+            f"the robot has {len(roots)} root links ({', '.join(roots)}): its "
+            "links are not connected by joints into one tree",
+        )
     return {j.get("name"): j for j in joints}
 
 
-def chain_locks(
-    root: ET.Element, path: Path, tip: str, base: str | None
-) -> tuple[str, ...]:
+def chain_locks(root: ET.Element, path: Path, tip: str, base: str | None) -> tuple[str, ...]:
     """The moving joints that are not on the kinematic chain from ``base`` (default: the root
     link) to ``tip``."""
     links = [link.get("name") for link in root.findall("link")]
@@ -241,8 +265,11 @@ def srdf_group_locks(root: ET.Element, path: Path, srdf: Path, group: str) -> tu
     except (ET.ParseError, OSError) as exc:
         raise URDFError(f"cannot read the SRDF {srdf}: {exc}", path=str(srdf)) from None
     if group not in groups:
-        raise URDFError(f"the SRDF {srdf} has no group {group!r}; its groups: "
-                        f"{', '.join(sorted(groups)) or 'none'}", path=str(srdf))
+        raise URDFError(
+            f"the SRDF {srdf} has no group {group!r}; its groups: "
+            f"{', '.join(sorted(groups)) or 'none'}",
+            path=str(srdf),
+        )
     joints = root.findall("joint")
     parent_joint = {j.find("child").get("link"): j.get("name") for j in joints}
     members: set[str] = set()
@@ -252,8 +279,10 @@ def srdf_group_locks(root: ET.Element, path: Path, srdf: Path, group: str) -> tu
             raise URDFError(f"SRDF group {name!r} of {srdf} contains itself", path=str(srdf))
         element = groups.get(name)
         if element is None:
-            raise URDFError(f"SRDF group {seen[-1]!r} of {srdf} refers to a group {name!r} it "
-                            "does not define", path=str(srdf))
+            raise URDFError(
+                f"SRDF group {seen[-1]!r} of {srdf} refers to a group {name!r} it does not define",
+                path=str(srdf),
+            )
         for item in element:
             if item.tag == "chain":
                 off = set(chain_locks(root, path, item.get("tip_link"), item.get("base_link")))
@@ -267,8 +296,7 @@ def srdf_group_locks(root: ET.Element, path: Path, srdf: Path, group: str) -> tu
 
     collect(group, ())
     return tuple(
-        j.get("name") for j in joints
-        if j.get("type") != "fixed" and j.get("name") not in members
+        j.get("name") for j in joints if j.get("type") != "fixed" and j.get("name") not in members
     )
 
 
@@ -362,16 +390,22 @@ def read_urdf(
             limit = ET.SubElement(joint, "limit")
         for attr in ("effort", "velocity"):
             if float(limit.get(attr, "0")) < 0.0:
-                raise _error(path, f"joint {name!r} has a negative {attr} limit "
-                                   f"{limit.get(attr)}: limits are magnitudes")
+                raise _error(
+                    path,
+                    f"joint {name!r} has a negative {attr} limit "
+                    f"{limit.get(attr)}: limits are magnitudes",
+                )
         if jtype == "continuous":
             joint.set("type", "revolute")
             limit.set("lower", "0")
             limit.set("upper", "0")
             continuous.append(name)
         elif float(limit.get("lower", "0")) > float(limit.get("upper", "0")):
-            raise _error(path, f"joint {name!r} has position limits lower {limit.get('lower')} > "
-                               f"upper {limit.get('upper')}")
+            raise _error(
+                path,
+                f"joint {name!r} has position limits lower {limit.get('lower')} > "
+                f"upper {limit.get('upper')}",
+            )
         if float(limit.get("effort", "0")) == 0.0 and name not in locked:
             no_effort.append(name)
         for attr in ("effort", "velocity", "lower", "upper"):

@@ -225,75 +225,163 @@ def verify(
     scale = np.maximum(np.abs(lim.effort_lower), np.abs(lim.effort_upper))
     excess = _excess(u, lim.effort_lower, lim.effort_upper, scale)
     worst = np.unravel_index(np.argmax(excess), excess.shape)
-    checks.append(Check("torque limits (RNEA)", float(excess[worst]), torque_tolerance,
-                        "relative", _where(t, names, worst)))
+    checks.append(
+        Check(
+            "torque limits (RNEA)",
+            float(excess[worst]),
+            torque_tolerance,
+            "relative",
+            _where(t, names, worst),
+        )
+    )
     if velocity_limits:
         excess = _excess(qd, -lim.velocity, lim.velocity, lim.velocity)
         worst = np.unravel_index(np.argmax(excess), excess.shape)
-        checks.append(Check("joint speed limits", float(excess[worst]), limit_tolerance,
-                            "relative", _where(t, names, worst)))
+        checks.append(
+            Check(
+                "joint speed limits",
+                float(excess[worst]),
+                limit_tolerance,
+                "relative",
+                _where(t, names, worst),
+            )
+        )
     if position_limits:
         excess = _excess(q, lim.position_lower, lim.position_upper, np.ones(n))
         worst = np.unravel_index(np.argmax(excess), excess.shape)
-        checks.append(Check("joint position limits", float(excess[worst]), limit_tolerance,
-                            "rad", _where(t, names, worst)))
+        checks.append(
+            Check(
+                "joint position limits",
+                float(excess[worst]),
+                limit_tolerance,
+                "rad",
+                _where(t, names, worst),
+            )
+        )
     if np.any(np.isfinite(lim.acceleration)):
         excess = _excess(qdd, -lim.acceleration, lim.acceleration, lim.acceleration)
         worst = np.unravel_index(np.argmax(excess), excess.shape)
-        checks.append(Check("joint acceleration limits", float(excess[worst]), limit_tolerance,
-                            "relative", _where(t, names, worst)))
+        checks.append(
+            Check(
+                "joint acceleration limits",
+                float(excess[worst]),
+                limit_tolerance,
+                "relative",
+                _where(t, names, worst),
+            )
+        )
     start = q[0] if q0 is None else robot.check_configuration(q0, "q0")
     goal = q[-1] if qe is None else robot.check_configuration(qe, "qe")
     ends = np.abs(np.vstack([q[0] - start, q[-1] - goal]))
     k, i = np.unravel_index(np.argmax(ends), ends.shape)
-    checks.append(Check("end positions", float(ends[k, i]), end_tolerance, "rad",
-                        f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}"))
+    checks.append(
+        Check(
+            "end positions",
+            float(ends[k, i]),
+            end_tolerance,
+            "rad",
+            f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}",
+        )
+    )
     if goal_pose is not None:
         from .kinematics import pose_error
 
         distance, angle = pose_error(robot, q[-1], goal_pose)
-        checks.append(Check("goal pose", max(distance, angle), end_tolerance, "m or rad",
-                            f"{goal_pose.frame or robot.tip!r}: {distance:.2e} m, {angle:.2e} rad "
-                            "from the target at t = te"))
+        checks.append(
+            Check(
+                "goal pose",
+                max(distance, angle),
+                end_tolerance,
+                "m or rad",
+                f"{goal_pose.frame or robot.tip!r}: {distance:.2e} m, {angle:.2e} rad "
+                "from the target at t = te",
+            )
+        )
     if waypoints:
         _check_waypoints(checks, trajectory, robot, waypoints, end_tolerance)
     rest = np.abs(qd[[0, -1]])
     k, i = np.unravel_index(np.argmax(rest), rest.shape)
-    checks.append(Check("rest at both ends", float(rest[k, i]), end_tolerance, "rad/s",
-                        f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}"))
+    checks.append(
+        Check(
+            "rest at both ends",
+            float(rest[k, i]),
+            end_tolerance,
+            "rad/s",
+            f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}",
+        )
+    )
     if collisions is not None and collisions.pairs:
         dist = np.array([collisions.distances(x) for x in q])
         k_t, k_p = np.unravel_index(np.argmin(dist), dist.shape)
         closest = float(dist[k_t, k_p])
-        checks.append(Check("clearance (coal)", collisions.margin - closest, 0.0, "m",
-                            f"{collisions.pairs[k_p]} {closest * 1e3:.2f} mm apart at t = "
-                            f"{t[k_t]:.4f} s (margin {collisions.margin * 1e3:.1f} mm)"))
+        checks.append(
+            Check(
+                "clearance (coal)",
+                collisions.margin - closest,
+                0.0,
+                "m",
+                f"{collisions.pairs[k_p]} {closest * 1e3:.2f} mm apart at t = "
+                f"{t[k_t]:.4f} s (margin {collisions.margin * 1e3:.1f} mm)",
+            )
+        )
     if cost is not None and J is not None:
         tf, weight = _simpson_nodes(trajectory.t, max(rate, 20000.0))
         qf, qdf, qddf = trajectory.states(tf)
-        uf = np.array([
-            pin.rnea(model, data, *x) + robot.damping * x[1]
-            for x in zip(qf, qdf, qddf, strict=True)
-        ])
+        uf = np.array(
+            [
+                pin.rnea(model, data, *x) + robot.damping * x[1]
+                for x in zip(qf, qdf, qddf, strict=True)
+            ]
+        )
         recomputed = float(weight @ cost(qf, qdf, uf))
-        checks.append(Check("J recomputed", abs(recomputed - J) / max(abs(J), 1e-12),
-                            cost_tolerance, "relative",
-                            f"(∫ f0 dt = {recomputed:.8g}, J = {J:.8g})"))
+        checks.append(
+            Check(
+                "J recomputed",
+                abs(recomputed - J) / max(abs(J), 1e-12),
+                cost_tolerance,
+                "relative",
+                f"(∫ f0 dt = {recomputed:.8g}, J = {J:.8g})",
+            )
+        )
     if not simulate:
         return VerificationReport(tuple(checks), float(rate), int(t.size))
     x_end, defect = _simulate(robot, trajectory, window)
-    checks.append(Check("simulated end position", float(np.max(np.abs(x_end[:n] - goal))),
-                        simulation_tolerance, "rad", "forward simulation of u(t) with ABA"))
-    checks.append(Check("simulated end speed", float(np.max(np.abs(x_end[n:]))),
-                        10 * simulation_tolerance, "rad/s", "forward simulation of u(t) with ABA"))
-    checks.append(Check("simulation window defect", defect, 10 * simulation_tolerance,
-                        "rad or rad/s", f"largest mismatch at the end of a {window:g} s window"))
+    checks.append(
+        Check(
+            "simulated end position",
+            float(np.max(np.abs(x_end[:n] - goal))),
+            simulation_tolerance,
+            "rad",
+            "forward simulation of u(t) with ABA",
+        )
+    )
+    checks.append(
+        Check(
+            "simulated end speed",
+            float(np.max(np.abs(x_end[n:]))),
+            10 * simulation_tolerance,
+            "rad/s",
+            "forward simulation of u(t) with ABA",
+        )
+    )
+    checks.append(
+        Check(
+            "simulation window defect",
+            defect,
+            10 * simulation_tolerance,
+            "rad or rad/s",
+            f"largest mismatch at the end of a {window:g} s window",
+        )
+    )
     return VerificationReport(tuple(checks), float(rate), int(t.size))
 
 
 def _check_waypoints(
-    checks: list[Check], trajectory: Motion, robot: Robot, waypoints: tuple[Waypoint, ...] |
-    list[Waypoint], tolerance: float,
+    checks: list[Check],
+    trajectory: Motion,
+    robot: Robot,
+    waypoints: tuple[Waypoint, ...] | list[Waypoint],
+    tolerance: float,
 ) -> None:
     """Append the waypoint checks: configuration, pose and rest at each waypoint's time."""
     from .kinematics import pose_error
@@ -302,25 +390,51 @@ def _check_waypoints(
     t = np.array([w.time for w in waypoints], dtype=float)
     q_at, qd_at, _ = trajectory.states(t)
     qd_before = trajectory.states(np.maximum(t - 1e-12 * max(1.0, trajectory.duration), 0.0))[1]
-    misses = [(float(np.max(np.abs(q_at[k] - robot.check_configuration(w.q, "waypoint")))), k)
-              for k, w in enumerate(waypoints) if w.q is not None]
+    misses = [
+        (float(np.max(np.abs(q_at[k] - robot.check_configuration(w.q, "waypoint")))), k)
+        for k, w in enumerate(waypoints)
+        if w.q is not None
+    ]
     if misses:
         worst, k = max(misses)
-        checks.append(Check("via-point positions", worst, tolerance, "rad",
-                            f"waypoint {k + 1} at t = {t[k]:.6g} s"))
-    poses = [(max(pose_error(robot, q_at[k], w.pose)), k)
-             for k, w in enumerate(waypoints) if w.pose is not None]
+        checks.append(
+            Check(
+                "via-point positions",
+                worst,
+                tolerance,
+                "rad",
+                f"waypoint {k + 1} at t = {t[k]:.6g} s",
+            )
+        )
+    poses = [
+        (max(pose_error(robot, q_at[k], w.pose)), k)
+        for k, w in enumerate(waypoints)
+        if w.pose is not None
+    ]
     if poses:
         worst, k = max(poses)
-        checks.append(Check("via-point poses", worst, tolerance, "m or rad",
-                            f"waypoint {k + 1} at t = {t[k]:.6g} s"))
+        checks.append(
+            Check(
+                "via-point poses",
+                worst,
+                tolerance,
+                "m or rad",
+                f"waypoint {k + 1} at t = {t[k]:.6g} s",
+            )
+        )
     stops = [k for k, w in enumerate(waypoints) if w.stop]
     if stops:
         speed = np.maximum(np.abs(qd_at[stops]), np.abs(qd_before[stops]))
         k, i = np.unravel_index(np.argmax(speed), speed.shape)
-        checks.append(Check("rest at stops", float(speed[k, i]), tolerance, "rad/s",
-                            f"waypoint {stops[k] + 1} at t = {t[stops[k]]:.6g} s, joint "
-                            f"{names[i]!r}"))
+        checks.append(
+            Check(
+                "rest at stops",
+                float(speed[k, i]),
+                tolerance,
+                "rad/s",
+                f"waypoint {stops[k] + 1} at t = {t[stops[k]]:.6g} s, joint {names[i]!r}",
+            )
+        )
 
 
 def _simpson_nodes(
@@ -373,8 +487,15 @@ def _simulate(
         x = state(w0)
         cuts = np.concatenate([[w0], knots[(knots > w0) & (knots < w1)], [w1]])
         for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-            sol = solve_ivp(rhs, (a, b - 1e-12 * max(1.0, b)), x, method="LSODA", jac=jac,
-                            rtol=1e-10, atol=1e-12)
+            sol = solve_ivp(
+                rhs,
+                (a, b - 1e-12 * max(1.0, b)),
+                x,
+                method="LSODA",
+                jac=jac,
+                rtol=1e-10,
+                atol=1e-12,
+            )
             x = sol.y[:, -1]
         if w1 < te:
             defect = max(defect, float(np.max(np.abs(x - state(w1)))))

@@ -40,8 +40,12 @@ def table(count: int, seed: int = 13) -> list[MotionRequest]:
         hi = np.minimum(robot.limits.position_upper, np.pi)
         mid, half = 0.5 * (lo + hi), 0.3 * (hi - lo)
         q0, qe = rng.uniform(mid - half, mid + half, (2, robot.n))
-        out.append(MotionRequest(f"m{k:03d}", {"robot": robot.name, "q0": q0.tolist(),
-                                               "qe": qe.tolist(), "beta": 0.001}))
+        out.append(
+            MotionRequest(
+                f"m{k:03d}",
+                {"robot": robot.name, "q0": q0.tolist(), "qe": qe.tolist(), "beta": 0.001},
+            )
+        )
     return out
 
 
@@ -71,22 +75,50 @@ def main() -> None:
             wall = time.perf_counter() - t0
         base = base or wall
         rows.append((f"local, {workers} worker(s)", wall, result.failed))
-        print(f"{rows[-1][0]:26} {wall:9.1f} {60 * len(requests) / wall:12.1f} "
-              f"{base / wall:9.2f} {result.failed:7d}", flush=True)
+        print(
+            f"{rows[-1][0]:26} {wall:9.1f} {60 * len(requests) / wall:12.1f} "
+            f"{base / wall:9.2f} {result.failed:7d}",
+            flush=True,
+        )
     import distributed
 
     with socket.socket() as s:
         s.bind(("127.0.0.1", 0))
         port = s.getsockname()[1]
     address = f"tcp://127.0.0.1:{port}"
-    processes = [subprocess.Popen([str(BIN / "dask"), "scheduler", "--host", "127.0.0.1",
-                                   "--port", str(port), "--no-dashboard"],
-                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)]
+    processes = [
+        subprocess.Popen(
+            [
+                str(BIN / "dask"),
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--no-dashboard",
+            ],
+            stdout=subprocess.DEVNULL,
+            stderr=subprocess.DEVNULL,
+        )
+    ]
     try:
         for _ in range(2):
-            processes.append(subprocess.Popen(
-                [str(BIN / "dask"), "worker", address, "--nthreads", "1", "--no-dashboard",
-                 "--host", "127.0.0.1"], stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL))
+            processes.append(
+                subprocess.Popen(
+                    [
+                        str(BIN / "dask"),
+                        "worker",
+                        address,
+                        "--nthreads",
+                        "1",
+                        "--no-dashboard",
+                        "--host",
+                        "127.0.0.1",
+                    ],
+                    stdout=subprocess.DEVNULL,
+                    stderr=subprocess.DEVNULL,
+                )
+            )
         client = distributed.Client(address, timeout=60)
         client.wait_for_workers(2, timeout=120)
         client.run(lambda: __import__("nearopt.cli"))  # both workers import nearopt first
@@ -94,10 +126,14 @@ def main() -> None:
             t0 = time.perf_counter()
             result = run_batch(requests, out, client)
             wall = time.perf_counter() - t0
-        print(f"{'dask, 2 workers':26} {wall:9.1f} {60 * len(requests) / wall:12.1f} "
-              f"{base / wall:9.2f} {result.failed:7d}", flush=True)
-        dask_overhead = overhead(lambda n: client.gather(
-            [client.submit(noop, k, pure=False) for k in range(n)]))
+        print(
+            f"{'dask, 2 workers':26} {wall:9.1f} {60 * len(requests) / wall:12.1f} "
+            f"{base / wall:9.2f} {result.failed:7d}",
+            flush=True,
+        )
+        dask_overhead = overhead(
+            lambda n: client.gather([client.submit(noop, k, pure=False) for k in range(n)])
+        )
         client.close()
     finally:
         for p in processes[::-1]:
@@ -106,8 +142,10 @@ def main() -> None:
     with cf.ProcessPoolExecutor(2, mp_context=multiprocessing.get_context("spawn")) as ex:
         list(ex.map(noop, range(4)))  # started
         local_overhead = overhead(lambda n: list(ex.map(noop, range(n))))
-    print(f"\noverhead per task (no-op tasks, 2 workers): dask {dask_overhead * 1e3:.2f} ms, "
-          f"local process pool {local_overhead * 1e3:.2f} ms")
+    print(
+        f"\noverhead per task (no-op tasks, 2 workers): dask {dask_overhead * 1e3:.2f} ms, "
+        f"local process pool {local_overhead * 1e3:.2f} ms"
+    )
 
 
 if __name__ == "__main__":

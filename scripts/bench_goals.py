@@ -30,8 +30,10 @@ def main() -> None:
     hi = np.minimum(robot.limits.position_upper, np.pi)
     cost = nearopt.TorqueCost(0.001)
     print(f"{args.robot}: tool-pose goals, f0 = 1 + 0.001 Σu²")
-    print(f"{'case':>4} {'J fixed θe':>11} {'J optimised':>12} {'ratio':>7} {'wall fixed':>11} "
-          f"{'wall optimised':>15} {'verified':>9}")
+    print(
+        f"{'case':>4} {'J fixed θe':>11} {'J optimised':>12} {'ratio':>7} {'wall fixed':>11} "
+        f"{'wall optimised':>15} {'verified':>9}"
+    )
     ratios = []
     for k in range(args.cases):
         q0, qt = rng.uniform(lo, hi), rng.uniform(lo, hi)
@@ -43,11 +45,18 @@ def main() -> None:
         t1 = time.perf_counter()
         moved = nearopt.plan(robot, q0, goal, cost)
         t2 = time.perf_counter()
-        ok = all(nearopt.verify(r.trajectory, robot, goal_pose=goal, cost=r.cost, J=r.J,
-                                simulate=False).passed for r in (fixed, moved))
+        ok = all(
+            nearopt.verify(
+                r.trajectory, robot, goal_pose=goal, cost=r.cost, J=r.J, simulate=False
+            ).passed
+            for r in (fixed, moved)
+        )
         ratios.append(moved.J / fixed.J)
-        print(f"{k:4d} {fixed.J:11.5f} {moved.J:12.5f} {moved.J / fixed.J:7.4f} "
-              f"{t1 - t0:10.2f}s {t2 - t1:14.2f}s {str(ok):>9}", flush=True)
+        print(
+            f"{k:4d} {fixed.J:11.5f} {moved.J:12.5f} {moved.J / fixed.J:7.4f} "
+            f"{t1 - t0:10.2f}s {t2 - t1:14.2f}s {str(ok):>9}",
+            flush=True,
+        )
     print(f"median ratio {np.median(ratios):.4f}, best {min(ratios):.4f}, worst {max(ratios):.4f}")
 
 

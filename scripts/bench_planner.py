@@ -106,10 +106,14 @@ def ipopt_two_link(intervals: int, te_guess: float = 0.45) -> tuple[float, float
     step = ca.Function("step", [x, u, dt], [x + dt / 6 * (k1 + 2 * k2 + 2 * k3 + k4)])
     states, torques, te = ca.MX.sym("X", 4, k + 1), ca.MX.sym("U", 2, k), ca.MX.sym("te")
     stepped = step.map(k)(ca.vertcat(states[:, :k], ca.MX.zeros(1, k)), torques, te / k)
-    nlp = {"x": ca.veccat(states, torques, te), "f": ca.sum2(stepped[4, :]),
-           "g": ca.veccat(stepped[:4, :] - states[:, 1:])}
-    solver = ca.nlpsol("shooting", "ipopt", nlp,
-                       {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"})
+    nlp = {
+        "x": ca.veccat(states, torques, te),
+        "f": ca.sum2(stepped[4, :]),
+        "g": ca.veccat(stepped[:4, :] - states[:, 1:]),
+    }
+    solver = ca.nlpsol(
+        "shooting", "ipopt", nlp, {"ipopt.print_level": 0, "print_time": False, "ipopt.sb": "yes"}
+    )
     rest = np.zeros(2)
     lbx = [np.full((4, k + 1), -np.inf), np.tile(-U_MAX[:, None], (1, k)), [0.01]]
     ubx = [np.full((4, k + 1), np.inf), np.tile(U_MAX[:, None], (1, k)), [10.0]]
@@ -145,8 +149,10 @@ def check_dynamics(robot: nearopt.Robot, samples: int = 5, tol: float = 1e-9) ->
 
 
 def paper_example(repeat: int, intervals: int) -> None:
-    print(f"1. The paper's example: nearopt against IPOPT (RK4 multiple shooting of eq. 31, "
-          f"K = {intervals}, built and solved), median of {repeat}")
+    print(
+        f"1. The paper's example: nearopt against IPOPT (RK4 multiple shooting of eq. 31, "
+        f"K = {intervals}, built and solved), median of {repeat}"
+    )
     robot = nearopt.Robot.from_name("two_link")
     print(f"eq. (31) against Pinocchio on the URDF: max |Δθ̈| = {check_dynamics(robot):.1e} rad/s²")
     cost = nearopt.TorqueCost(BETA)
@@ -155,10 +161,14 @@ def paper_example(repeat: int, intervals: int) -> None:
         lambda: ipopt_two_link(intervals), repeat
     )
     print(f"{'':<22}{'J':>10}{'te [s]':>9}{'wall [s]':>10}{'iterations':>12}")
-    print(f"{'nearopt plan':<22}{ours.J:>10.6f}{ours.duration:>9.4f}{wall:>10.3f}"
-          f"{len(ours.history) - 1:>12d}   ({ours.evaluations} stage-1 solves)")
-    print(f"{f'IPOPT K={intervals}':<22}{ref_j:>10.6f}{ref_te:>9.4f}{ref_wall:>10.3f}"
-          f"{ref_iterations:>12d}")
+    print(
+        f"{'nearopt plan':<22}{ours.J:>10.6f}{ours.duration:>9.4f}{wall:>10.3f}"
+        f"{len(ours.history) - 1:>12d}   ({ours.evaluations} stage-1 solves)"
+    )
+    print(
+        f"{f'IPOPT K={intervals}':<22}{ref_j:>10.6f}{ref_te:>9.4f}{ref_wall:>10.3f}"
+        f"{ref_iterations:>12d}"
+    )
     print(f"ratio nearopt / IPOPT: J {ours.J / ref_j:.5f}, wall time {wall / ref_wall:.2f}\n")
 
 
@@ -171,8 +181,10 @@ def cases(arms: tuple[str, ...]) -> list[Case]:
         lo = np.maximum(lim.position_lower, -np.pi)
         hi = np.minimum(lim.position_upper, np.pi)
         rng = np.random.default_rng(11)
-        motions = {"tied": (lo + 0.3 * (hi - lo), lo + 0.7 * (hi - lo)),
-                   "random": (rng.uniform(lo, hi), rng.uniform(lo, hi))}
+        motions = {
+            "tied": (lo + 0.3 * (hi - lo), lo + 0.7 * (hi - lo)),
+            "random": (rng.uniform(lo, hi), rng.uniform(lo, hi)),
+        }
         u_max = np.maximum(np.abs(lim.effort_lower), np.abs(lim.effort_upper))
         for motion, (q0, qe) in motions.items():
             for cost, weights in (("time", np.zeros(robot.n)), ("normalised", 0.5 / u_max**2)):
@@ -188,48 +200,62 @@ def plan(case: Case, **options: Any) -> tuple[nearopt.PlanResult, float]:
 
 
 def real_arms(all_cases: list[Case], intervals: int, starts: int) -> None:
-    print(f"2. Real arms, URDF limits: nearopt against the IPOPT reference (K = {intervals}, "
-          f"{starts} starts)")
-    print(f"{'arm    motion  cost':<26}{'J line':>10}{'J nearopt':>11}{'J IPOPT':>10}"
-          f"{'gap':>9}{'wall [s]':>10}{'iter':>6}{'stage 1':>9}{'IPOPT [s]':>11}")
+    print(
+        f"2. Real arms, URDF limits: nearopt against the IPOPT reference (K = {intervals}, "
+        f"{starts} starts)"
+    )
+    print(
+        f"{'arm    motion  cost':<26}{'J line':>10}{'J nearopt':>11}{'J IPOPT':>10}"
+        f"{'gap':>9}{'wall [s]':>10}{'iter':>6}{'stage 1':>9}{'IPOPT [s]':>11}"
+    )
     worst = -np.inf
     for case in all_cases:
         result, wall = plan(case)
         try:
-            ref = solve_reference(case.robot, case.q0, case.qe, case.weights,
-                                  intervals=intervals, starts=starts)
+            ref = solve_reference(
+                case.robot, case.q0, case.qe, case.weights, intervals=intervals, starts=starts
+            )
             ref_j, ref_wall = ref.J, ref.wall_time
         except RuntimeError as exc:  # no start solved: report it, go on
             ref_j, ref_wall = np.nan, np.nan
             print(f"   (IPOPT: {exc})")
         gap = result.J / ref_j - 1.0
         worst = max(worst, gap)
-        print(f"{case.label:<26}{result.initial.J:>10.5f}{result.J:>11.5f}{ref_j:>10.5f}"
-              f"{100 * gap:>8.2f}%{wall:>10.2f}{len(result.history) - 1:>6d}"
-              f"{result.evaluations:>9d}{ref_wall:>11.1f}")
+        print(
+            f"{case.label:<26}{result.initial.J:>10.5f}{result.J:>11.5f}{ref_j:>10.5f}"
+            f"{100 * gap:>8.2f}%{wall:>10.2f}{len(result.history) - 1:>6d}"
+            f"{result.evaluations:>9d}{ref_wall:>11.1f}"
+        )
     print(f"largest gap nearopt / IPOPT: {100 * worst:+.2f} %\n")
 
 
 def resolution(all_cases: list[Case], counts: tuple[int, ...]) -> None:
-    print("3. J against the number of interior control points K (knots clustered at the ends; "
-          "relative to the largest K)")
+    print(
+        "3. J against the number of interior control points K (knots clustered at the ends; "
+        "relative to the largest K)"
+    )
     print(f"{'arm    motion  cost':<26}" + "".join(f"{f'K={k}':>16}" for k in counts))
     for case in all_cases:
         results = [plan(case, options=nearopt.SCPOptions(control_points=k)) for k in counts]
         best = results[-1][0].J
-        print(f"{case.label:<26}" + "".join(
-            f"{100 * (r.J / best - 1):>+9.3f}% {w:>5.1f}s" for r, w in results))
+        print(
+            f"{case.label:<26}"
+            + "".join(f"{100 * (r.J / best - 1):>+9.3f}% {w:>5.1f}s" for r, w in results)
+        )
     print()
 
 
 def wall_times(repeat: int) -> None:
     print(f"4. Full plans at the default grid (median of {repeat} runs)")
-    print(f"{'arm':<26}{'motion':<10}{'J line':>10}{'J':>10}{'wall [s]':>10}{'iter':>6}"
-          f"{'stage 1':>9}")
+    print(
+        f"{'arm':<26}{'motion':<10}{'J line':>10}{'J':>10}{'wall [s]':>10}{'iter':>6}{'stage 1':>9}"
+    )
     panda = nearopt.Robot.from_name("panda")
     tiago = nearopt.Robot.from_urdf(
         package_dirs()[0] / "example-robot-data/robots/tiago_description/robots/tiago.urdf",
-        tip="arm_7_link", base="torso_lift_link", name="tiago arm",
+        tip="arm_7_link",
+        base="torso_lift_link",
+        name="tiago arm",
     )
     for robot, seeds in ((panda, range(5)), (tiago, range(3))):
         lim = robot.limits
@@ -241,12 +267,15 @@ def wall_times(repeat: int) -> None:
         for seed in seeds:
             rng = np.random.default_rng(seed)
             q0, qe = rng.uniform(lo, hi), rng.uniform(lo, hi)
-            wall, result = median_time(lambda q0=q0, qe=qe: nearopt.plan(robot, q0, qe, cost),
-                                       repeat)
+            wall, result = median_time(
+                lambda q0=q0, qe=qe: nearopt.plan(robot, q0, qe, cost), repeat
+            )
             walls.append(wall)
-            print(f"{robot.name:<26}{f'seed {seed}':<10}{result.initial.J:>10.5f}"
-                  f"{result.J:>10.5f}{wall:>10.2f}{len(result.history) - 1:>6d}"
-                  f"{result.evaluations:>9d}")
+            print(
+                f"{robot.name:<26}{f'seed {seed}':<10}{result.initial.J:>10.5f}"
+                f"{result.J:>10.5f}{wall:>10.2f}{len(result.history) - 1:>6d}"
+                f"{result.evaluations:>9d}"
+            )
         print(f"{robot.name:<26}{'median':<10}{'':>20}{np.median(walls):>10.2f}")
     print()
 
@@ -254,14 +283,16 @@ def wall_times(repeat: int) -> None:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--paper-intervals", type=int, default=100,
-                        help="K of the paper example's IPOPT peer")
+    parser.add_argument(
+        "--paper-intervals", type=int, default=100, help="K of the paper example's IPOPT peer"
+    )
     parser.add_argument("--intervals", type=int, default=60, help="K of the arm references")
     parser.add_argument("--starts", type=int, default=3, help="starts of the arm references")
     parser.add_argument("--arms", nargs="+", default=list(ARMS))
     parser.add_argument("--control-points", nargs="+", type=int, default=[8, 12, 16, 24, 48])
-    parser.add_argument("--skip", nargs="*", default=[], choices=["1", "2", "3", "4"],
-                        help="sections to leave out")
+    parser.add_argument(
+        "--skip", nargs="*", default=[], choices=["1", "2", "3", "4"], help="sections to leave out"
+    )
     args = parser.parse_args()
     all_cases = cases(tuple(args.arms))
     if "1" not in args.skip:

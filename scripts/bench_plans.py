@@ -29,8 +29,11 @@ class Stage1Clock:
     def __init__(self) -> None:
         self.calls, self.seconds = 0, 0.0
         self._real = driver.optimal_timing
-        modules = [m for m in __import__("sys").modules.values()
-                   if m is not None and getattr(m, "__name__", "").startswith("nearopt")]
+        modules = [
+            m
+            for m in __import__("sys").modules.values()
+            if m is not None and getattr(m, "__name__", "").startswith("nearopt")
+        ]
         self._patched = [m for m in modules if getattr(m, "optimal_timing", None) is self._real]
 
     def __enter__(self) -> Stage1Clock:
@@ -68,8 +71,9 @@ def main() -> None:
     plans = {
         "paper's example": lambda: nearopt.plan(two_link, THETA_0, THETA_E, COST),
         "panda free": lambda: nearopt.plan(panda, free[0], free[1], cost),
-        "panda cell": lambda: nearopt.plan(panda, cell[0], cell[1], cost,
-                                           scene=CollisionModel(panda, CELL)),
+        "panda cell": lambda: nearopt.plan(
+            panda, cell[0], cell[1], cost, scene=CollisionModel(panda, CELL)
+        ),
     }
     plans["paper's example"]()  # the first plan of a process loads what it needs
     print(f"{'plan':<17}{'J':>10}{'wall [s]':>10}{'timings':>9}{'stage 1 [s]':>13}{'share':>7}")
@@ -83,8 +87,11 @@ def main() -> None:
             stage1.append(clock.seconds)
             calls = clock.calls
         k = int(np.argsort(walls)[len(walls) // 2])
-        print(f"{label:<17}{result.J:>10.6f}{walls[k]:>10.2f}{calls:>9}{stage1[k]:>13.2f}"
-              f"{100 * stage1[k] / walls[k]:>6.0f}%", flush=True)
+        print(
+            f"{label:<17}{result.J:>10.6f}{walls[k]:>10.2f}{calls:>9}{stage1[k]:>13.2f}"
+            f"{100 * stage1[k] / walls[k]:>6.0f}%",
+            flush=True,
+        )
 
 
 if __name__ == "__main__":

@@ -36,19 +36,37 @@ def random_task(robot: nearopt.Robot, rng: np.random.Generator) -> tuple[np.ndar
     for k in range(4):
         m = robot.frame_placement(rng.uniform(mid - half, mid + half))
         quat = pin.Quaternion(m.rotation)
-        targets.append(Target(ToolPose(m.translation, (quat.x, quat.y, quat.z, quat.w)),
-                              stop=k % 2 == 1, name=f"p{k + 1}"))
+        targets.append(
+            Target(
+                ToolPose(m.translation, (quat.x, quat.y, quat.z, quat.w)),
+                stop=k % 2 == 1,
+                name=f"p{k + 1}",
+            )
+        )
     return q0, targets
 
 
-def run(robot: nearopt.Robot, q0: np.ndarray, targets: list, cost: nearopt.Cost,
-        scene: nearopt.Scene | None, optimise: bool) -> tuple[nearopt.TaskResult, float, bool]:
+def run(
+    robot: nearopt.Robot,
+    q0: np.ndarray,
+    targets: list,
+    cost: nearopt.Cost,
+    scene: nearopt.Scene | None,
+    optimise: bool,
+) -> tuple[nearopt.TaskResult, float, bool]:
     t0 = time.perf_counter()
     result = nearopt.plan_task(robot, q0, targets, cost, scene=scene, optimise_goal=optimise)
     wall = time.perf_counter() - t0
-    report = nearopt.verify(result.trajectory, robot, q0=q0, goal_pose=result.goal,
-                            waypoints=result.waypoints, cost=cost, J=result.J,
-                            collisions=result.collisions)
+    report = nearopt.verify(
+        result.trajectory,
+        robot,
+        q0=q0,
+        goal_pose=result.goal,
+        waypoints=result.waypoints,
+        cost=cost,
+        J=result.J,
+        collisions=result.collisions,
+    )
     return result, wall, report.passed
 
 
@@ -66,8 +84,10 @@ def main() -> None:
         q0, targets = random_task(robot, rng)
         cases.append((f"random {k + 1}, free", q0, targets, None))
     print(f"panda, 4 tool-pose targets per task, f0 = {cost.describe()}")
-    print(f"{'task':22} {'segments':>8} {'J fixed θe':>11} {'J optimised':>12} {'ratio':>7} "
-          f"{'te [s]':>7} {'wall fixed':>11} {'wall optimised':>15} {'verified':>9}")
+    print(
+        f"{'task':22} {'segments':>8} {'J fixed θe':>11} {'J optimised':>12} {'ratio':>7} "
+        f"{'te [s]':>7} {'wall fixed':>11} {'wall optimised':>15} {'verified':>9}"
+    )
     ratios, walls = [], []
     for name, q0, targets, scene in cases:
         try:
@@ -78,13 +98,18 @@ def main() -> None:
             continue
         ratios.append(moved.J / fixed.J)
         walls.append(wall_moved)
-        print(f"{name:22} {len(moved.segments):8d} {fixed.J:11.5f} {moved.J:12.5f} "
-              f"{moved.J / fixed.J:7.4f} {moved.duration:7.3f} {wall_fixed:10.1f}s "
-              f"{wall_moved:14.1f}s {str(ok_fixed and ok_moved):>9}", flush=True)
+        print(
+            f"{name:22} {len(moved.segments):8d} {fixed.J:11.5f} {moved.J:12.5f} "
+            f"{moved.J / fixed.J:7.4f} {moved.duration:7.3f} {wall_fixed:10.1f}s "
+            f"{wall_moved:14.1f}s {str(ok_fixed and ok_moved):>9}",
+            flush=True,
+        )
     if ratios:
-        print(f"J optimised / J fixed: median {np.median(ratios):.4f} (best {min(ratios):.4f}, "
-              f"worst {max(ratios):.4f}); wall time (optimised) median {np.median(walls):.1f} s, "
-              f"max {max(walls):.1f} s")
+        print(
+            f"J optimised / J fixed: median {np.median(ratios):.4f} (best {min(ratios):.4f}, "
+            f"worst {max(ratios):.4f}); wall time (optimised) median {np.median(walls):.1f} s, "
+            f"max {max(walls):.1f} s"
+        )
 
 
 if __name__ == "__main__":

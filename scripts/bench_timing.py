@@ -62,8 +62,9 @@ def knots_only(problem: nearopt.timing.TimingProblem) -> nearopt.timing.TimingPr
     return dataclasses.replace(problem, interior_speed=None, interior=None)
 
 
-def peer(case: str, robot: nearopt.Robot, path: nearopt.Path, sigma: np.ndarray,
-         which: str) -> peers.PeerResult:
+def peer(
+    case: str, robot: nearopt.Robot, path: nearopt.Path, sigma: np.ndarray, which: str
+) -> peers.PeerResult:
     acc = np.full(robot.n, ACCELERATION) if case == "speed+acc" else None
     torque = case != "speed+acc"
     if case == "energy":
@@ -76,9 +77,11 @@ def peer(case: str, robot: nearopt.Robot, path: nearopt.Path, sigma: np.ndarray,
 
 def comparison(args: argparse.Namespace) -> None:
     print("\nnearopt against its peers (median of repeats; times in ms; durations in s)")
-    head = (f"{'robot':<7}{'case':<10}{'N':>5}{'path':>5}{'ours':>8}{'solve':>7}{'copp':>7}"
-            f"{'toppra':>8}{'ours/copp':>10}{'te ours':>12}{'te knots':>12}{'te copp':>12}"
-            f"{'knots/copp-1':>13}{'J ours':>11}{'J/ref-1':>9}")
+    head = (
+        f"{'robot':<7}{'case':<10}{'N':>5}{'path':>5}{'ours':>8}{'solve':>7}{'copp':>7}"
+        f"{'toppra':>8}{'ours/copp':>10}{'te ours':>12}{'te knots':>12}{'te copp':>12}"
+        f"{'knots/copp-1':>13}{'J ours':>11}{'J/ref-1':>9}"
+    )
     print(head)
     ratios: dict[tuple[str, str, int], list[float]] = {}
     topp2: dict[tuple[str, int, int], float] = {}  # copp TOPP2-RA's time, torque case
@@ -90,16 +93,16 @@ def comparison(args: argparse.Namespace) -> None:
                 for seed in range(args.paths):
                     path = spline(robot, seed)
                     t_ours, ours = median_time(
-                        lambda: nearopt.optimal_timing(robot, path, cost, grid=grid), args.repeat)
+                        lambda: nearopt.optimal_timing(robot, path, cost, grid=grid), args.repeat
+                    )
                     problem = build_timing_problem(robot, path, grid=grid)
-                    t_solve, solved = median_time(lambda: solve_timing(problem, cost),
-                                                  args.repeat)
+                    t_solve, solved = median_time(lambda: solve_timing(problem, cost), args.repeat)
                     knots = solve_timing(knots_only(problem), cost)
                     te_knots = segment_times(problem.sigma, knots.b).sum()
                     try:
                         t_copp, copp = median_time(
-                            lambda: peer(case, robot, path, problem.sigma, "copp"),
-                            args.repeat)
+                            lambda: peer(case, robot, path, problem.sigma, "copp"), args.repeat
+                        )
                         te_copp = copp.duration
                     except RuntimeError as exc:  # the peer failed: say so, keep going
                         print(f"  copp failed on {name} {case} N = {grid} path {seed}: {exc}")
@@ -107,8 +110,8 @@ def comparison(args: argparse.Namespace) -> None:
                     t_topp = np.nan
                     if case != "energy":
                         t_topp, _ = median_time(
-                            lambda: peer(case, robot, path, problem.sigma, "toppra"),
-                            args.repeat)
+                            lambda: peer(case, robot, path, problem.sigma, "toppra"), args.repeat
+                        )
                     rel = np.nan
                     if args.reference:
                         try:
@@ -122,15 +125,21 @@ def comparison(args: argparse.Namespace) -> None:
                         topp2[(name, grid, seed)] = t_copp
                     if case == "energy":  # the yardstick: copp's time-optimal TOPP2-RA
                         ratios.setdefault((name, "energy/RA", grid), []).append(
-                            t_ours / topp2.get((name, grid, seed), np.nan))
-                    print(f"{name:<7}{case:<10}{grid:>5}{seed:>5}{1e3 * t_ours:>8.1f}"
-                          f"{1e3 * t_solve:>7.1f}{1e3 * t_copp:>7.1f}{1e3 * t_topp:>8.1f}"
-                          f"{ratio:>10.1f}{ours.duration:>12.6f}{te_knots:>12.6f}"
-                          f"{te_copp:>12.6f}{te_knots / te_copp - 1:>13.1e}"
-                          f"{ours.J:>11.6f}{rel:>9.1e}", flush=True)
-    print("\nmedian ratio of wall times, nearopt optimal_timing / copp (its Pinocchio callbacks "
-          "included; energy: against COPP2-SOCP, energy/RA: against TOPP2-RA's time-optimal "
-          "solve of the same path)")
+                            t_ours / topp2.get((name, grid, seed), np.nan)
+                        )
+                    print(
+                        f"{name:<7}{case:<10}{grid:>5}{seed:>5}{1e3 * t_ours:>8.1f}"
+                        f"{1e3 * t_solve:>7.1f}{1e3 * t_copp:>7.1f}{1e3 * t_topp:>8.1f}"
+                        f"{ratio:>10.1f}{ours.duration:>12.6f}{te_knots:>12.6f}"
+                        f"{te_copp:>12.6f}{te_knots / te_copp - 1:>13.1e}"
+                        f"{ours.J:>11.6f}{rel:>9.1e}",
+                        flush=True,
+                    )
+    print(
+        "\nmedian ratio of wall times, nearopt optimal_timing / copp (its Pinocchio callbacks "
+        "included; energy: against COPP2-SOCP, energy/RA: against TOPP2-RA's time-optimal "
+        "solve of the same path)"
+    )
     for (name, case, grid), values in ratios.items():
         print(f"  {name:<7}{case:<10}N = {grid:<6}{np.nanmedian(values):6.1f}×")
 
@@ -143,14 +152,18 @@ def growth(args: argparse.Namespace) -> None:
     grids = [100, 200, 500, 1000, 2000, 5000]
     totals, solves = [], []
     for grid in grids:
-        t_all, res = median_time(lambda: nearopt.optimal_timing(robot, path, grid=grid),
-                                 args.repeat)
+        t_all, res = median_time(
+            lambda: nearopt.optimal_timing(robot, path, grid=grid), args.repeat
+        )
         problem = build_timing_problem(robot, path, grid=grid)
         t_solve, sol = median_time(lambda: solve_timing(problem, TimeCost()), args.repeat)
         totals.append(t_all)
         solves.append(t_solve)
-        print(f"  N = {grid:>5}: optimal_timing {1e3 * t_all:8.1f}, solve {1e3 * t_solve:7.1f} "
-              f"({sol.iterations} iterations), te {res.duration:.6f} s", flush=True)
+        print(
+            f"  N = {grid:>5}: optimal_timing {1e3 * t_all:8.1f}, solve {1e3 * t_solve:7.1f} "
+            f"({sol.iterations} iterations), te {res.duration:.6f} s",
+            flush=True,
+        )
     for label, values in (("optimal_timing", totals), ("solve", solves)):
         slope = np.polyfit(np.log(grids), np.log(values), 1)[0]
         print(f"  {label}: time ∝ N^{slope:.2f} from N = {grids[0]} to {grids[-1]}")
@@ -189,8 +202,9 @@ def sweep(args: argparse.Namespace) -> None:
             scale = scales[(k // 3) % len(scales)]
             cost = (TimeCost(), ENERGY)[k % 2]
             for acc in (np.inf, ACCELERATION):
-                robot = base.with_limits(acceleration=acc * scale,
-                                         velocity=np.asarray(base.limits.velocity) * scale)
+                robot = base.with_limits(
+                    acceleration=acc * scale, velocity=np.asarray(base.limits.velocity) * scale
+                )
                 for grid in grids:
                     try:
                         problem = build_timing_problem(robot, path, grid=grid)
@@ -199,14 +213,19 @@ def sweep(args: argparse.Namespace) -> None:
                         continue
                     except nearopt.NearoptError as exc:
                         failures += 1
-                        print(f"  FAILED {name} path {k} ({kind}) N = {grid} scale {scale:g} "
-                              f"acc {acc:g}: {exc}", flush=True)
+                        print(
+                            f"  FAILED {name} path {k} ({kind}) N = {grid} scale {scale:g} "
+                            f"acc {acc:g}: {exc}",
+                            flush=True,
+                        )
                         continue
                     solved += 1
                     if sol.solver != TimingMethod.INTERIOR:
                         fallbacks += 1
-                        print(f"  fallback {name} path {k} N = {grid} scale {scale:g}: "
-                              f"{sol.message}", flush=True)
+                        print(
+                            f"  fallback {name} path {k} N = {grid} scale {scale:g}: {sol.message}",
+                            flush=True,
+                        )
                     if grid <= 1000 and k % 5 == 0:
                         try:
                             ref = solve_timing(problem, cost, method=TimingMethod.SOCP)
@@ -214,8 +233,10 @@ def sweep(args: argparse.Namespace) -> None:
                             continue
                         compared += 1
                         worst = max(worst, sol.objective / ref.objective - 1.0)
-    print(f"  {solved} problems solved, {fallbacks} by the fallback, {failures} failed; "
-          f"against Clarabel ({compared} compared): J ours / J Clarabel − 1 ≤ {worst:.1e}")
+    print(
+        f"  {solved} problems solved, {fallbacks} by the fallback, {failures} failed; "
+        f"against Clarabel ({compared} compared): J ours / J Clarabel − 1 ≤ {worst:.1e}"
+    )
 
 
 def main() -> None:
@@ -224,16 +245,20 @@ def main() -> None:
     parser.add_argument("--grids", nargs="+", type=int, default=[200, 1000])
     parser.add_argument("--paths", type=int, default=5, help="seeded splines per case")
     parser.add_argument("--repeat", type=int, default=3)
-    parser.add_argument("--reference", action="store_true",
-                        help="compare J with Clarabel's SOCP on the same rows")
+    parser.add_argument(
+        "--reference", action="store_true", help="compare J with Clarabel's SOCP on the same rows"
+    )
     parser.add_argument("--sweep", action="store_true", help="run the robustness sweep too")
     parser.add_argument("--sweep-paths", type=int, default=36)
     args = parser.parse_args()
     start = time.perf_counter()
-    nearopt.optimal_timing(arm("two_link", "torque"),
-                           spline(arm("two_link", "torque"), 0))  # numba's cold start
-    print(f"first stage-1 call of the process (numba loads its compiled kernel): "
-          f"{time.perf_counter() - start:.2f} s")
+    nearopt.optimal_timing(
+        arm("two_link", "torque"), spline(arm("two_link", "torque"), 0)
+    )  # numba's cold start
+    print(
+        f"first stage-1 call of the process (numba loads its compiled kernel): "
+        f"{time.perf_counter() - start:.2f} s"
+    )
     comparison(args)
     growth(args)
     if args.sweep:

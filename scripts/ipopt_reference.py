@@ -368,9 +368,7 @@ def aba_casadi(model: pin.Model, damping: ArrayLike, q: Any, qd: Any, u: Any) ->
         ia[i] = inertia
         momentum = ca.mtimes(inertia, v_i)
         f_lin, f_ang = momentum[:3], momentum[3:]
-        pa[i] = ca.vertcat(
-            ca.cross(v_ang, f_lin), ca.cross(v_ang, f_ang) + ca.cross(v_lin, f_lin)
-        )
+        pa[i] = ca.vertcat(ca.cross(v_ang, f_lin), ca.cross(v_ang, f_ang) + ca.cross(v_lin, f_lin))
 
     # pass 2: articulated inertias and bias forces, leaves to root
     big_u: list[Any] = [None] * nj
@@ -550,8 +548,7 @@ def _interval_functions(
     robot: nearopt.Robot, substeps: int, inner_rows: tuple[int, ...]
 ) -> _IntervalFunctions:
     """The cached :class:`_IntervalFunctions` of an arm (independent of K)."""
-    key = (id(robot.model), np.asarray(robot.damping, dtype=float).tobytes(), substeps,
-           inner_rows)
+    key = (id(robot.model), np.asarray(robot.damping, dtype=float).tobytes(), substeps, inner_rows)
     if key in _INTERVALS:
         return _INTERVALS[key][1]
     n = robot.n
@@ -602,8 +599,17 @@ def _transcription(
     model = robot.model
     if threads is None:
         threads = min(2, os.cpu_count() or 1) if robot.n >= 4 else 1
-    key = (id(model), np.asarray(robot.damping, dtype=float).tobytes(), K, substeps, tol,
-           max_iter, inner_rows, threads, expand)
+    key = (
+        id(model),
+        np.asarray(robot.damping, dtype=float).tobytes(),
+        K,
+        substeps,
+        tol,
+        max_iter,
+        inner_rows,
+        threads,
+        expand,
+    )
     if key in _NLPS:
         return _NLPS[key]
     t0 = time.perf_counter()
@@ -644,16 +650,16 @@ def _transcription(
         kk, rr = np.meshgrid(np.arange(K), np.arange(n2), indexing="ij")
         rows = np.r_[(k[:, :, None] * ny + r[None]).ravel(), (kk * ny + rr).ravel()]
         cols = np.r_[zidx[:, c].ravel(), n2 + (kk * n2 + rr).ravel()]
-        src = np.r_[((k[:, :, None] * nz + c[None]) * ny + r[None]).ravel(),
-                    np.full(n2 * K, ny * nz * K)]
+        src = np.r_[
+            ((k[:, :, None] * nz + c[None]) * ny + r[None]).ravel(), np.full(n2 * K, ny * nz * K)
+        ]
         jac_scale = np.tile(np.repeat(zscale, ny), K)
         values = ca.vertcat(ca.vec(jac_all) * jac_scale, -1)
         jac = _assemble((ny * K, nw), rows, cols, src, values)
 
         # Hessian of the Lagrangian, upper triangle: per-interval blocks, (te, te) summed
         lam_f, lam_g = ca.MX.sym("lam_f"), ca.MX.sym("lam_g", ny * K)
-        h_all = funcs.hess.map(K, *mode)(X[:, :K], U, h, ca.reshape(lam_g, ny, K), lam_f,
-                                         weights)
+        h_all = funcs.hess.map(K, *mode)(X[:, :K], U, h, ca.reshape(lam_g, ny, K), lam_f, weights)
         ia, ib = _upper_triangle(nz)
         m = len(ia)
         tt = m - 1  # (te, te) is the last entry in column-major order
@@ -666,12 +672,18 @@ def _transcription(
         hess = _assemble((nw, nw), rows, cols, src, values)
 
         options["jac_g"] = ca.Function(
-            "nlp_jac_g", [decision, weights], [ca.vec(y_all - targets), jac],
-            ["x", "p"], ["g", "jac_g_x"],
+            "nlp_jac_g",
+            [decision, weights],
+            [ca.vec(y_all - targets), jac],
+            ["x", "p"],
+            ["g", "jac_g_x"],
         )
         options["hess_lag"] = ca.Function(
-            "nlp_hess_l", [decision, weights, lam_f, lam_g], [hess],
-            ["x", "p", "lam_f", "lam_g"], ["triu_hess_gamma_x_x"],
+            "nlp_hess_l",
+            [decision, weights, lam_f, lam_g],
+            [hess],
+            ["x", "p", "lam_f", "lam_g"],
+            ["triu_hess_gamma_x_x"],
         )
     nlp = {
         "x": decision,
@@ -685,8 +697,9 @@ def _transcription(
     return built
 
 
-def _te_estimate(robot: nearopt.Robot, q0: NDArray[np.float64], qe: NDArray[np.float64],
-                 velocity_limits: bool) -> float:
+def _te_estimate(
+    robot: nearopt.Robot, q0: NDArray[np.float64], qe: NDArray[np.float64], velocity_limits: bool
+) -> float:
     """A rough minimum time [s]: per joint bang-bang (speed-capped) at acceleration u_max/H_ii."""
     lim = robot.limits
     dist = np.abs(qe - q0)
@@ -845,8 +858,13 @@ def solve_reference(
         stats = nlp.solver.stats()
         status = str(stats["return_status"])
         runs.append(
-            _Start(j, status, float(sol["f"]), int(stats["iter_count"]),
-                   np.asarray(sol["x"], dtype=float).ravel())
+            _Start(
+                j,
+                status,
+                float(sol["f"]),
+                int(stats["iter_count"]),
+                np.asarray(sol["x"], dtype=float).ravel(),
+            )
         )
 
     solved = [r for r in runs if r.status in ACCEPTED]
@@ -924,8 +942,9 @@ def _integrate(
 
         span = (float(t[k]), float(t[k + 1]))
         t_eval = np.linspace(span[0], span[1], dense + 1) if dense else None
-        sol = solve_ivp(rhs, span, nodes[-1], method="DOP853", rtol=1e-10, atol=1e-12,
-                        t_eval=t_eval)
+        sol = solve_ivp(
+            rhs, span, nodes[-1], method="DOP853", rtol=1e-10, atol=1e-12, t_eval=t_eval
+        )
         if not sol.success:
             raise RuntimeError(f"re-simulation failed on interval {k}: {sol.message}")
         if dense:
@@ -1017,15 +1036,18 @@ def resimulate(
     limited = np.isfinite(v_max)
     speed_excess = (
         float(np.max(np.abs(qd_d[:, limited]) / v_max[limited]) - 1.0)
-        if np.any(limited) else -math.inf
+        if np.any(limited)
+        else -math.inf
     )
     bounded = np.isfinite(q_lo) | np.isfinite(q_hi)
     position_excess = (
         float(np.max(np.maximum(q_lo - q_d, q_d - q_hi)[:, bounded]))
-        if np.any(bounded) else -math.inf
+        if np.any(bounded)
+        else -math.inf
     )
-    return ResimulationResult(end_position, end_speed, speed_excess, position_excess, worst_q,
-                              worst_v, t_dense, q_d, qd_d)
+    return ResimulationResult(
+        end_position, end_speed, speed_excess, position_excess, worst_q, worst_v, t_dense, q_d, qd_d
+    )
 
 
 # ---------------------------------------------------------------------------------- printing
@@ -1093,8 +1115,14 @@ def main() -> None:
     args = parser.parse_args()
 
     cases: list[tuple[str, nearopt.Robot, Any, Any, float, bool]] = [
-        ("two_link paper example", nearopt.Robot.from_name("two_link"), PAPER_Q0, PAPER_QE,
-         PAPER_BETA, True),
+        (
+            "two_link paper example",
+            nearopt.Robot.from_name("two_link"),
+            PAPER_Q0,
+            PAPER_QE,
+            PAPER_BETA,
+            True,
+        ),
     ]
     for name in args.robots:
         robot = nearopt.Robot.from_name(name)
@@ -1107,8 +1135,14 @@ def main() -> None:
         check = _checked_dynamics(robot)
         try:
             sol = solve_reference(
-                robot, q0, qe, beta, intervals=args.K, substeps=args.substeps,
-                velocity_limits=speed, starts=args.starts,
+                robot,
+                q0,
+                qe,
+                beta,
+                intervals=args.K,
+                substeps=args.substeps,
+                velocity_limits=speed,
+                starts=args.starts,
             )
         except RuntimeError as exc:
             print(f"{label:<28}  failed: {exc}", flush=True)

@@ -38,8 +38,13 @@ import numpy as np
 import pinocchio as pin
 import toppra as ta
 
-__all__ = ["PeerResult", "copp_topp2_ra", "toppra_duration", "copp_copp2_socp_energy",
-           "duration_from_b"]
+__all__ = [
+    "PeerResult",
+    "copp_topp2_ra",
+    "toppra_duration",
+    "copp_copp2_socp_energy",
+    "duration_from_b",
+]
 
 
 @dataclass(frozen=True)
@@ -78,22 +83,27 @@ def duration_from_b(sigma: np.ndarray, b: np.ndarray) -> float:
 
 def _check(robot, sigma: np.ndarray, torque: bool) -> np.ndarray:
     sigma = np.asarray(sigma, dtype=float)
-    if sigma.ndim != 1 or sigma.size < 3 or sigma[0] != 0.0 or sigma[-1] != 1.0 \
-            or np.any(np.diff(sigma) <= 0):
+    if (
+        sigma.ndim != 1
+        or sigma.size < 3
+        or sigma[0] != 0.0
+        or sigma[-1] != 1.0
+        or np.any(np.diff(sigma) <= 0)
+    ):
         raise ValueError("sigma must increase strictly from 0 to 1 (≥ 3 knots)")
     if torque and np.any(np.asarray(robot.damping) != 0.0):
         raise ValueError(
             f"{robot.name} has viscous damping {np.asarray(robot.damping).tolist()}: the peers' "
             "torque rows are linear in (ṡ², s̈) and cannot hold the D θ' √b term (a callback's "
-            "D q̇ would be imposed as D θ' b); use robot.with_limits(damping=0.0)")
+            "D q̇ would be imposed as D θ' b); use robot.with_limits(damping=0.0)"
+        )
     return sigma
 
 
 def _samples(path, sigma: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """θ, dθ/dσ, d²θ/dσ² at the knots, each (N+1, n), C-contiguous float64."""
     s = sigma * path.s_end
-    return tuple(np.ascontiguousarray(path(s, k) * path.s_end**k, dtype=float)
-                 for k in (0, 1, 2))
+    return tuple(np.ascontiguousarray(path(s, k) * path.s_end**k, dtype=float) for k in (0, 1, 2))
 
 
 def _inverse_dynamics(robot):
@@ -112,9 +122,11 @@ def _copp_robot(robot, path, sigma, *, velocity, torque, acceleration, callback=
     """A ``copp_py.Robot`` on the knots σ with θ(σ) sampled by ``set_q`` and the limits added."""
     knots = sigma.size
     theta, dtheta, ddtheta = _samples(path, sigma)
-    crobot = copp.Robot(robot.n, capacity=knots,
-                        inverse_dynamics=_inverse_dynamics(robot) if (torque or callback)
-                        else None)
+    crobot = copp.Robot(
+        robot.n,
+        capacity=knots,
+        inverse_dynamics=_inverse_dynamics(robot) if (torque or callback) else None,
+    )
     crobot.append_s(sigma)
     crobot.set_q(theta, dtheta, ddtheta, 0)
     lim = robot.limits
@@ -125,14 +137,18 @@ def _copp_robot(robot, path, sigma, *, velocity, torque, acceleration, callback=
         acc = np.broadcast_to(np.asarray(acceleration, dtype=float), (robot.n,)).copy()
         crobot.add_acceleration_limits(acc, -acc, start_idx_s=0, length=knots)
     if torque:
-        crobot.add_torque_limits(np.asarray(lim.effort_upper, dtype=float),
-                                 np.asarray(lim.effort_lower, dtype=float),
-                                 start_idx_s=0, length=knots)
+        crobot.add_torque_limits(
+            np.asarray(lim.effort_upper, dtype=float),
+            np.asarray(lim.effort_lower, dtype=float),
+            start_idx_s=0,
+            length=knots,
+        )
     return crobot
 
 
-def copp_topp2_ra(robot, path, sigma, *, velocity=True, torque=True,
-                  acceleration=None) -> PeerResult:
+def copp_topp2_ra(
+    robot, path, sigma, *, velocity=True, torque=True, acceleration=None
+) -> PeerResult:
     """copp-py's TOPP2-RA (``copp_py.solver.topp2_ra.solve``) on nearopt's knots.
 
     ``copp_py.Robot(n, inverse_dynamics=pin.rnea callback)``, ``append_s(σ)``,
@@ -143,22 +159,37 @@ def copp_topp2_ra(robot, path, sigma, *, velocity=True, torque=True,
     """
     t0 = time.perf_counter()
     sigma = _check(robot, sigma, torque)
-    crobot = _copp_robot(robot, path, sigma, velocity=velocity, torque=torque,
-                         acceleration=acceleration)
-    problem = copp.solver.topp2_ra.Problem(crobot.constraints,
-                                           idx_s_interval=(0, sigma.size - 1),
-                                           a_boundary=(0.0, 0.0))
+    crobot = _copp_robot(
+        robot, path, sigma, velocity=velocity, torque=torque, acceleration=acceleration
+    )
+    problem = copp.solver.topp2_ra.Problem(
+        crobot.constraints, idx_s_interval=(0, sigma.size - 1), a_boundary=(0.0, 0.0)
+    )
     t1 = time.perf_counter()
     b = np.asarray(copp.solver.topp2_ra.solve(problem, copp.solver.topp2_ra.Options()))
     t2 = time.perf_counter()
     b = np.maximum(b, 0.0)
-    return PeerResult(duration_from_b(sigma, b), t2 - t0, t2 - t1, b,
-                      f"copp-py {copp.version()} TOPP2-RA, stations = nearopt's knots, "
-                      "rows at both ends of each segment, default ReachSet2Options")
+    return PeerResult(
+        duration_from_b(sigma, b),
+        t2 - t0,
+        t2 - t1,
+        b,
+        f"copp-py {copp.version()} TOPP2-RA, stations = nearopt's knots, "
+        "rows at both ends of each segment, default ReachSet2Options",
+    )
 
 
-def copp_copp2_socp_energy(robot, path, sigma, weights, *, velocity=True, torque=True,
-                           acceleration=None, fix_gravity_sign=True) -> PeerResult:
+def copp_copp2_socp_energy(
+    robot,
+    path,
+    sigma,
+    weights,
+    *,
+    velocity=True,
+    torque=True,
+    acceleration=None,
+    fix_gravity_sign=True,
+) -> PeerResult:
     """copp-py's COPP2-SOCP (Clarabel) for J = ∫(1 + Σ w_i u_i²) dt on nearopt's knots.
 
     Objectives ``[copp.objective.Time(1), copp.objective.ThermalEnergy(1, normalize=√w)]``
@@ -185,8 +216,15 @@ def copp_copp2_socp_energy(robot, path, sigma, weights, *, velocity=True, torque
     if np.any(w < 0) or not np.all(np.isfinite(w)):
         raise ValueError(f"weights must be finite and ≥ 0, got {w.tolist()}")
     sigma = _check(robot, sigma, torque or bool(np.any(w > 0)))  # the energy uses the torque
-    crobot = _copp_robot(robot, path, sigma, velocity=velocity, torque=torque,
-                         acceleration=acceleration, callback=True)
+    crobot = _copp_robot(
+        robot,
+        path,
+        sigma,
+        velocity=velocity,
+        torque=torque,
+        acceleration=acceleration,
+        callback=True,
+    )
     objectives = [copp.objective.Time(1.0)]
     fixed = False
     if np.any(w > 0):
@@ -196,27 +234,33 @@ def copp_copp2_socp_energy(robot, path, sigma, weights, *, velocity=True, torque
             data = model.createData()
 
             def shifted(q, dq, ddq):  # ID − 2g: the objective's cone then holds +g (see above)
-                return (pin.rnea(model, data, q, dq, ddq)
-                        - 2.0 * pin.computeGeneralizedGravity(model, data, q))
+                return pin.rnea(model, data, q, dq, ddq) - 2.0 * pin.computeGeneralizedGravity(
+                    model, data, q
+                )
 
             crobot.set_inverse_dynamics(shifted)
             fixed = True
-    problem = copp.solver.copp2_socp.Problem(crobot, objectives,
-                                             idx_s_interval=(0, sigma.size - 1),
-                                             a_boundary=(0.0, 0.0))
+    problem = copp.solver.copp2_socp.Problem(
+        crobot, objectives, idx_s_interval=(0, sigma.size - 1), a_boundary=(0.0, 0.0)
+    )
     t1 = time.perf_counter()
     result = copp.solver.copp2_socp.solve_expert(problem, copp.solver.copp2_socp.Options())
     t2 = time.perf_counter()
     if result.a is None:
         raise RuntimeError(f"COPP2-SOCP did not solve: {result.solver_status}")
     b = np.maximum(np.asarray(result.a), 0.0)
-    return PeerResult(duration_from_b(sigma, b), t2 - t0, t2 - t1, b,
-                      f"copp-py {copp.version()} COPP2-SOCP (Clarabel, default options), "
-                      f"{' + '.join(type(o).__name__ for o in objectives)}"
-                      f"{' (gravity-sign workaround)' if fixed else ''}, "
-                      f"status {result.solver_status}, "
-                      f"{result.iterations} iterations, Clarabel {1e3 * result.solve_time:.2f} ms",
-                      objective=float(result.obj_val if fixed else result.objective_value))
+    return PeerResult(
+        duration_from_b(sigma, b),
+        t2 - t0,
+        t2 - t1,
+        b,
+        f"copp-py {copp.version()} COPP2-SOCP (Clarabel, default options), "
+        f"{' + '.join(type(o).__name__ for o in objectives)}"
+        f"{' (gravity-sign workaround)' if fixed else ''}, "
+        f"status {result.solver_status}, "
+        f"{result.iterations} iterations, Clarabel {1e3 * result.solve_time:.2f} ms",
+        objective=float(result.obj_val if fixed else result.objective_value),
+    )
 
 
 # ---------------------------------------------------------------- TOPP-RA
@@ -231,6 +275,7 @@ def _version(dist: str) -> str:
 
 def _toppra_path(path):
     """nearopt's θ(s) as a toppra path θ(σ), σ ∈ [0, 1] (derivatives with respect to σ)."""
+
     class SigmaPath(ta.interpolator.AbstractGeometricPath):
         def __call__(self, sigma, order=0):
             sigma = np.asarray(sigma, dtype=float)
@@ -248,8 +293,9 @@ def _toppra_path(path):
     return SigmaPath()
 
 
-def toppra_duration(robot, path, sigma, *, velocity=True, torque=True,
-                    acceleration=None) -> PeerResult:
+def toppra_duration(
+    robot, path, sigma, *, velocity=True, torque=True, acceleration=None
+) -> PeerResult:
     """TOPP-RA (``toppra.algorithm.TOPPRA``, default solver wrapper: seidel) on nearopt's knots.
 
     ``JointVelocityConstraint``, ``JointAccelerationConstraint`` and ``JointTorqueConstraint``
@@ -268,15 +314,20 @@ def toppra_duration(robot, path, sigma, *, velocity=True, torque=True,
         constraints.append(ta.constraint.JointVelocityConstraint(np.column_stack([-v, v])))
     if acceleration is not None:
         acc = np.broadcast_to(np.asarray(acceleration, dtype=float), (robot.n,))
-        constraints.append(ta.constraint.JointAccelerationConstraint(
-            np.column_stack([-acc, acc]), discretization_scheme=scheme))
+        constraints.append(
+            ta.constraint.JointAccelerationConstraint(
+                np.column_stack([-acc, acc]), discretization_scheme=scheme
+            )
+        )
     if torque:
-        constraints.append(ta.constraint.JointTorqueConstraint(
-            _inverse_dynamics(robot),
-            np.column_stack([lim.effort_lower, lim.effort_upper]),
-            np.zeros(robot.n),
-            discretization_scheme=scheme,
-        ))
+        constraints.append(
+            ta.constraint.JointTorqueConstraint(
+                _inverse_dynamics(robot),
+                np.column_stack([lim.effort_lower, lim.effort_upper]),
+                np.zeros(robot.n),
+                discretization_scheme=scheme,
+            )
+        )
     algo = ta.algorithm.TOPPRA(constraints, _toppra_path(path), gridpoints=sigma)
     t1 = time.perf_counter()
     _, sd, _ = algo.compute_parameterization(0.0, 0.0)
@@ -284,9 +335,14 @@ def toppra_duration(robot, path, sigma, *, velocity=True, torque=True,
     if sd is None:
         raise RuntimeError(f"TOPP-RA failed: {algo.problem_data.return_code}")
     b = np.asarray(sd, dtype=float) ** 2
-    return PeerResult(duration_from_b(sigma, b), t2 - t0, t2 - t1, b,
-                      f"toppra {_version('toppra')} TOPPRA ({type(algo.solver_wrapper).__name__}), "
-                      "gridpoints = nearopt's knots, Interpolation")
+    return PeerResult(
+        duration_from_b(sigma, b),
+        t2 - t0,
+        t2 - t1,
+        b,
+        f"toppra {_version('toppra')} TOPPRA ({type(algo.solver_wrapper).__name__}), "
+        "gridpoints = nearopt's knots, Interpolation",
+    )
 
 
 # ---------------------------------------------------------------- self-test
@@ -320,13 +376,20 @@ def _self_test() -> None:
     from nearopt.timing import Discretisation
 
     accel = 10.0
-    cases = [("torque+speed", True, None), (f"speed+acc{accel:g}", False, accel),
-             (f"all+acc{accel:g}", True, accel)]
-    print("time-optimal, limits at the knots only; te [s]; rel = x/nearopt − 1; "
-          "SOCP = copp COPP2-SOCP Time(1) on the TOPP2-RA rows; ms = wall/solve")
-    print(f"{'robot':<6}{'case':<13}{'N':>5}{'copp RA':>13}{'toppra':>13}{'nearopt':>13}"
-          f"{'SOCP':>13}{'rel RA':>10}{'rel tpra':>10}{'rel SOCP':>10}"
-          f"{'copp RA ms':>14}{'toppra ms':>13}{'SOCP ms':>15}{'near ms':>8}")
+    cases = [
+        ("torque+speed", True, None),
+        (f"speed+acc{accel:g}", False, accel),
+        (f"all+acc{accel:g}", True, accel),
+    ]
+    print(
+        "time-optimal, limits at the knots only; te [s]; rel = x/nearopt − 1; "
+        "SOCP = copp COPP2-SOCP Time(1) on the TOPP2-RA rows; ms = wall/solve"
+    )
+    print(
+        f"{'robot':<6}{'case':<13}{'N':>5}{'copp RA':>13}{'toppra':>13}{'nearopt':>13}"
+        f"{'SOCP':>13}{'rel RA':>10}{'rel tpra':>10}{'rel SOCP':>10}"
+        f"{'copp RA ms':>14}{'toppra ms':>13}{'SOCP ms':>15}{'near ms':>8}"
+    )
     for name in ("panda", "ur5"):
         robot = nearopt.Robot.from_name(name).with_limits(damping=0.0)
         path = _spline(robot, seed=7)
@@ -344,23 +407,28 @@ def _self_test() -> None:
                 acc_vec = None if acc is None else np.full(robot.n, acc)
                 cp = copp_topp2_ra(arm, path, sigma, torque=torque, acceleration=acc_vec)
                 tp = toppra_duration(arm, path, sigma, torque=torque, acceleration=acc_vec)
-                sc = copp_copp2_socp_energy(arm, path, sigma, np.zeros(robot.n), torque=torque,
-                                            acceleration=acc_vec)
+                sc = copp_copp2_socp_energy(
+                    arm, path, sigma, np.zeros(robot.n), torque=torque, acceleration=acc_vec
+                )
                 rel = [x.duration / te_near - 1 for x in (cp, tp, sc)]
                 ms = [f"{1e3 * x.wall_time:.1f}/{1e3 * x.solve_time:.2f}" for x in (cp, tp, sc)]
-                print(f"{name:<6}{label:<13}{grid:>5}{cp.duration:>13.9f}{tp.duration:>13.9f}"
-                      f"{te_near:>13.9f}{sc.duration:>13.9f}"
-                      + "".join(f"{r:>10.1e}" for r in rel)
-                      + f"{ms[0]:>14}{ms[1]:>13}{ms[2]:>15}{1e3 * wall_near:>8.0f}")
+                print(
+                    f"{name:<6}{label:<13}{grid:>5}{cp.duration:>13.9f}{tp.duration:>13.9f}"
+                    f"{te_near:>13.9f}{sc.duration:>13.9f}"
+                    + "".join(f"{r:>10.1e}" for r in rel)
+                    + f"{ms[0]:>14}{ms[1]:>13}{ms[2]:>15}{1e3 * wall_near:>8.0f}"
+                )
 
     # the energy cost J = ∫(1 + Σ w u²) dt. copp's quadrature takes the torque at each segment's
     # start, nearopt's both ends: "J own" is each solver's own value, "J_near(b)" nearopt's
     # discretised J at that solver's profile (≥ nearopt's optimum); "raw" = copp without the
     # gravity-sign workaround
     print("\nJ = ∫(1 + β Σu²) dt, β = 1e-3 (copp: COPP2-SOCP Time + ThermalEnergy)")
-    print(f"{'robot':<6}{'N':>5}{'J near':>11}{'J copp own':>12}"
-          f"{'J_near(copp)':>13}{'rel':>9}{'J_near(raw)':>12}{'rel':>9}{'te near':>9}"
-          f"{'te copp':>9}{'te raw':>9}{'copp ms':>14}{'near ms':>9}")
+    print(
+        f"{'robot':<6}{'N':>5}{'J near':>11}{'J copp own':>12}"
+        f"{'J_near(copp)':>13}{'rel':>9}{'J_near(raw)':>12}{'rel':>9}{'te near':>9}"
+        f"{'te copp':>9}{'te raw':>9}{'copp ms':>14}{'near ms':>9}"
+    )
     for name in ("panda", "ur5"):
         robot = nearopt.Robot.from_name(name).with_limits(damping=0.0)
         path = _spline(robot, seed=7)
@@ -374,12 +442,15 @@ def _self_test() -> None:
             raw = copp_copp2_socp_energy(robot, path, problem.sigma, w, fix_gravity_sign=False)
             j_fix = disc.objective(fixed.b[1:-1], cost)[0]
             j_raw = disc.objective(raw.b[1:-1], cost)[0]
-            print(f"{name:<6}{grid:>5}{sol.objective:>11.6f}{fixed.objective:>12.6f}"
-                  f"{j_fix:>13.6f}{j_fix / sol.objective - 1:>9.1e}{j_raw:>12.6f}"
-                  f"{j_raw / sol.objective - 1:>9.1e}{te_near:>9.5f}{fixed.duration:>9.5f}"
-                  f"{raw.duration:>9.5f}"
-                  f"{f'{1e3 * fixed.wall_time:.1f}/{1e3 * fixed.solve_time:.1f}':>14}"
-                  f"{1e3 * wall_near:>9.0f}")
+            print(
+                f"{name:<6}{grid:>5}{sol.objective:>11.6f}{fixed.objective:>12.6f}"
+                f"{j_fix:>13.6f}{j_fix / sol.objective - 1:>9.1e}{j_raw:>12.6f}"
+                f"{j_raw / sol.objective - 1:>9.1e}{te_near:>9.5f}{fixed.duration:>9.5f}"
+                f"{raw.duration:>9.5f}"
+                f"{f'{1e3 * fixed.wall_time:.1f}/{1e3 * fixed.solve_time:.1f}':>14}"
+                f"{1e3 * wall_near:>9.0f}"
+            )
+
 
 if __name__ == "__main__":
     _self_test()

@@ -19,39 +19,91 @@ from nearopt.cli import main, parse_plan, plan_request
 
 def test_the_options_table_names_every_field() -> None:
     assert set(_KINDS) == {f.name for f in dataclasses.fields(PlanRequest)}
-    parser_fields = vars(parse_plan(["plan", "--robot", "two_link", "--q0", "0", "0",
-                                     "--qe", "1", "1"]))
+    parser_fields = vars(
+        parse_plan(["plan", "--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1"])
+    )
     assert set(_KINDS) <= set(parser_fields)  # every field is an option of `nearopt plan`
 
 
 def test_the_command_line_and_a_mapping_make_the_same_request() -> None:
-    argv = ["plan", "--robot", "ur5", "--q0", "-1e-05", "-1.57", "-.5", "0", "1e-3", "-inf",
-            "--goal-pose", "0.307", "-2.69e-16", "0.4", "--via", "-1e-05", "0", "0", "0", "0",
-            "0", "--via", "1", "2", "3", "4", "5", "6", "--beta", "1e-3", "--grid", "80",
-            "--effort-limit", "-1e12", "--no-self-collision", "--time-limit", "inf",
-            "--quiet", "--verify"]
+    argv = [
+        "plan",
+        "--robot",
+        "ur5",
+        "--q0",
+        "-1e-05",
+        "-1.57",
+        "-.5",
+        "0",
+        "1e-3",
+        "-inf",
+        "--goal-pose",
+        "0.307",
+        "-2.69e-16",
+        "0.4",
+        "--via",
+        "-1e-05",
+        "0",
+        "0",
+        "0",
+        "0",
+        "0",
+        "--via",
+        "1",
+        "2",
+        "3",
+        "4",
+        "5",
+        "6",
+        "--beta",
+        "1e-3",
+        "--grid",
+        "80",
+        "--effort-limit",
+        "-1e12",
+        "--no-self-collision",
+        "--time-limit",
+        "inf",
+        "--quiet",
+        "--verify",
+    ]
     from_cli = plan_request(parse_plan(argv))
-    mapping = {"robot": "ur5", "q0": [-1e-05, -1.57, -0.5, 0, 1e-3, "-inf"],
-               "goal_pose": np.array([0.307, -2.69e-16, 0.4]),
-               "via": [[-1e-05, 0, 0, 0, 0, 0], (1, 2, 3, 4, 5, 6)], "beta": 1e-3, "grid": 80.0,
-               "effort_limit": -1e12, "self_collision": False, "time_limit": float("inf"),
-               "quiet": True, "verify": True}
+    mapping = {
+        "robot": "ur5",
+        "q0": [-1e-05, -1.57, -0.5, 0, 1e-3, "-inf"],
+        "goal_pose": np.array([0.307, -2.69e-16, 0.4]),
+        "via": [[-1e-05, 0, 0, 0, 0, 0], (1, 2, 3, 4, 5, 6)],
+        "beta": 1e-3,
+        "grid": 80.0,
+        "effort_limit": -1e12,
+        "self_collision": False,
+        "time_limit": float("inf"),
+        "quiet": True,
+        "verify": True,
+    }
     assert PlanRequest.from_mapping(mapping) == from_cli
     assert from_cli.q0[0] == -1e-05 and from_cli.goal_pose[1] == -2.69e-16
     assert from_cli.q0[-1] == -np.inf and from_cli.self_collision is False
 
 
-@pytest.mark.parametrize("options, message", [
-    ({"grid": 1.5}, "option 'grid' takes an integer"),
-    ({"deg": 1}, "option 'deg' takes true or false"),
-    ({"q0": []}, "takes at least one number"),
-    ({"q0": ["a"]}, "option 'q0' takes a number or a list of numbers"),
-    ({"robot": "two_link", "urdf": "x.urdf"}, "give the arm as robot"),
-    ({"robot": "two_link", "q0": [0, 0], "qe": [1, 1], "beta": 1.0, "time_optimal": True},
-     "give the cost as beta, weights or time_optimal, once"),
-    ({"robot": "two_link", "q0": [0, 0], "qe": [1, 1], "method": "newton"},
-     "method must be one of"),
-])
+@pytest.mark.parametrize(
+    "options, message",
+    [
+        ({"grid": 1.5}, "option 'grid' takes an integer"),
+        ({"deg": 1}, "option 'deg' takes true or false"),
+        ({"q0": []}, "takes at least one number"),
+        ({"q0": ["a"]}, "option 'q0' takes a number or a list of numbers"),
+        ({"robot": "two_link", "urdf": "x.urdf"}, "give the arm as robot"),
+        (
+            {"robot": "two_link", "q0": [0, 0], "qe": [1, 1], "beta": 1.0, "time_optimal": True},
+            "give the cost as beta, weights or time_optimal, once",
+        ),
+        (
+            {"robot": "two_link", "q0": [0, 0], "qe": [1, 1], "method": "newton"},
+            "method must be one of",
+        ),
+    ],
+)
 def test_a_bad_mapping_says_which_option(options: dict, message: str) -> None:
     with pytest.raises(nearopt.ConfigurationError, match=message):
         PlanRequest.from_mapping(options).check()
@@ -85,8 +137,25 @@ def test_small_negative_numbers_on_the_command_line(tmp_path: Path) -> None:
     out = tmp_path / "plan.json"
     handler = signal.getsignal(signal.SIGINT)
     try:
-        code = main(["plan", "--robot", "two_link", "--q0", "-1e-3", "0.5", "--qe", "-.5",
-                     "-1e-05", "--stage1-only", "--grid", "60", "--quiet", "--json", str(out)])
+        code = main(
+            [
+                "plan",
+                "--robot",
+                "two_link",
+                "--q0",
+                "-1e-3",
+                "0.5",
+                "--qe",
+                "-.5",
+                "-1e-05",
+                "--stage1-only",
+                "--grid",
+                "60",
+                "--quiet",
+                "--json",
+                str(out),
+            ]
+        )
     finally:
         signal.signal(signal.SIGINT, handler)
     assert code == 0
@@ -96,8 +165,15 @@ def test_small_negative_numbers_on_the_command_line(tmp_path: Path) -> None:
 
 
 def test_run_plans_and_verifies_in_this_process() -> None:
-    request = PlanRequest(robot="two_link", q0=(0.7, -1.5), qe=(-1.5, 0.0), beta=0.03, grid=60,
-                          max_iterations=3, rate=500.0)
+    request = PlanRequest(
+        robot="two_link",
+        q0=(0.7, -1.5),
+        qe=(-1.5, 0.0),
+        beta=0.03,
+        grid=60,
+        max_iterations=3,
+        rate=500.0,
+    )
     outcome = run(request)
     assert outcome.report.passed and outcome.prepared.request is request
     assert isinstance(outcome.result, nearopt.PlanResult)

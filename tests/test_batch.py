@@ -45,11 +45,26 @@ def motions(count_per_arm: int = 7, seed: int = 3) -> list[dict]:
         mid, half = 0.5 * (lo + hi), 0.3 * (hi - lo)
         for k in range(count_per_arm):
             q0, qe = rng.uniform(mid - half, mid + half, (2, robot.n))
-            out.append({"id": f"{name}-{k}", "robot": name, "q0": q0.round(4).tolist(),
-                        "qe": qe.round(4).tolist(), "beta": 0.001, "max_iterations": 2,
-                        "grid": 60})
-    out.append({"id": "too-weak", "robot": "ur5", "q0": [0, -1.2, 1.2, -1.5, -1.57, 0],
-                "qe": [0.5, -1.2, 1.2, -1.5, -1.57, 0], "effort_limit": [1.0]})
+            out.append(
+                {
+                    "id": f"{name}-{k}",
+                    "robot": name,
+                    "q0": q0.round(4).tolist(),
+                    "qe": qe.round(4).tolist(),
+                    "beta": 0.001,
+                    "max_iterations": 2,
+                    "grid": 60,
+                }
+            )
+    out.append(
+        {
+            "id": "too-weak",
+            "robot": "ur5",
+            "q0": [0, -1.2, 1.2, -1.5, -1.57, 0],
+            "qe": [0.5, -1.2, 1.2, -1.5, -1.57, 0],
+            "effort_limit": [1.0],
+        }
+    )
     return out
 
 
@@ -65,8 +80,12 @@ def summary(folder: Path) -> list[dict[str, str]]:
 
 
 def batch(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
-    return subprocess.run([sys.executable, "-m", "nearopt.cli", "batch", *args, "--quiet"],
-                          capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", "batch", *args, "--quiet"],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+    )
 
 
 def without_wall_time(rows: list[dict[str, str]]) -> list[dict[str, str]]:
@@ -87,15 +106,43 @@ def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
     port = free_port()
     address = f"tcp://127.0.0.1:{port}"
     logs = [open(folder / f"{name}.log", "w") for name in ("scheduler", "w1", "w2")]  # noqa: SIM115
-    processes = [subprocess.Popen(
-        [str(BIN / "dask"), "scheduler", "--host", "127.0.0.1", "--port", str(port),
-         "--no-dashboard"], stdout=logs[0], stderr=subprocess.STDOUT, cwd=folder)]
+    processes = [
+        subprocess.Popen(
+            [
+                str(BIN / "dask"),
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--no-dashboard",
+            ],
+            stdout=logs[0],
+            stderr=subprocess.STDOUT,
+            cwd=folder,
+        )
+    ]
     try:
         for log in logs[1:]:
-            processes.append(subprocess.Popen(
-                [str(BIN / "dask"), "worker", address, "--nthreads", "1", "--nworkers", "1",
-                 "--no-dashboard", "--host", "127.0.0.1"],
-                stdout=log, stderr=subprocess.STDOUT, cwd=folder))
+            processes.append(
+                subprocess.Popen(
+                    [
+                        str(BIN / "dask"),
+                        "worker",
+                        address,
+                        "--nthreads",
+                        "1",
+                        "--nworkers",
+                        "1",
+                        "--no-dashboard",
+                        "--host",
+                        "127.0.0.1",
+                    ],
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    cwd=folder,
+                )
+            )
         client = distributed.Client(address, timeout=60)
         client.wait_for_workers(2, timeout=120)
         yield {"address": address, "client": client, "workers": processes[1:]}
@@ -131,10 +178,10 @@ def test_a_local_batch_plans_every_motion_and_records_the_failure(
     assert [r["id"] for r in rows] == [r["id"] for r in motions()]
     failed = [r for r in rows if r["status"] == "failed"]
     assert [r["id"] for r in failed] == ["too-weak"]
-    assert "InfeasiblePathError" in failed[0]["error"] and "shoulder_lift_joint" in failed[0][
-        "error"]
-    assert json.loads((out / "failed" / "too-weak.json").read_text())["error"] == failed[0][
-        "error"]
+    assert (
+        "InfeasiblePathError" in failed[0]["error"] and "shoulder_lift_joint" in failed[0]["error"]
+    )
+    assert json.loads((out / "failed" / "too-weak.json").read_text())["error"] == failed[0]["error"]
     requests = {r["id"]: r for r in motions()}
     for row in rows:
         if row["status"] == "failed":
@@ -147,12 +194,12 @@ def test_a_local_batch_plans_every_motion_and_records_the_failure(
         np.testing.assert_allclose(doc["q"][-1], requests[row["id"]]["qe"], atol=1e-9)
         np.testing.assert_allclose(doc["qd"][-1], 0.0, atol=1e-9)
         limits = load(doc["robot"]).limits
-        assert np.all(np.abs(doc["tau"]) <= np.maximum(-limits.effort_lower,
-                                                       limits.effort_upper) * (1 + 1e-6))
+        assert np.all(
+            np.abs(doc["tau"]) <= np.maximum(-limits.effort_lower, limits.effort_upper) * (1 + 1e-6)
+        )
 
 
-def test_a_dask_cluster_gives_the_same_summary(cluster: dict,
-                                               local_run: tuple[Path, Path]) -> None:
+def test_a_dask_cluster_gives_the_same_summary(cluster: dict, local_run: tuple[Path, Path]) -> None:
     tasks, local_out = local_run
     out = tasks.parent / "dask-out"
     run = batch(str(tasks), "--out", str(out), "--scheduler", cluster["address"])
@@ -202,7 +249,8 @@ def test_a_dead_local_worker_is_replaced_and_its_motions_rerun(tmp_path: Path) -
         result = run_batch(requests, tmp_path, pool, progress=kill_once)
     assert killed and result.failed == 0
     assert sorted(p.name for p in tmp_path.glob("*.json")) == sorted(
-        f"{r.id}.json" for r in requests)
+        f"{r.id}.json" for r in requests
+    )
 
 
 def test_an_interrupted_batch_resumes_without_replanning(tmp_path: Path) -> None:
@@ -210,8 +258,22 @@ def test_an_interrupted_batch_resumes_without_replanning(tmp_path: Path) -> None
     tasks = write_motions(tmp_path, records)
     out = tmp_path / "out"
     process = subprocess.Popen(
-        [sys.executable, "-m", "nearopt.cli", "batch", str(tasks), "--out", str(out),
-         "--workers", "2", "--quiet"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+        [
+            sys.executable,
+            "-m",
+            "nearopt.cli",
+            "batch",
+            str(tasks),
+            "--out",
+            str(out),
+            "--workers",
+            "2",
+            "--quiet",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     deadline = time.time() + 300
     while time.time() < deadline and not list(out.glob("*.json")):
         time.sleep(0.02)
@@ -223,32 +285,47 @@ def test_an_interrupted_batch_resumes_without_replanning(tmp_path: Path) -> None
     assert 1 <= len(first) < len(records)
     assert not list(out.glob("**/.*")), "no half-written file is left"
     rows = summary(out)  # the files and the summary are written together: they agree
-    written = {Path(r["id"] + ".json") if r["status"] != "failed" else
-               Path("failed", r["id"] + ".json") for r in rows}
+    written = {
+        Path(r["id"] + ".json") if r["status"] != "failed" else Path("failed", r["id"] + ".json")
+        for r in rows
+    }
     assert written == set(first)
     run = batch(str(tasks), "--out", str(out))
     assert f"({len(first)} done before, skipped)" in run.stdout
-    assert {p.relative_to(out): p.stat().st_mtime_ns for p in out.glob("**/*.json")
-            if p.relative_to(out) in first} == first
+    assert {
+        p.relative_to(out): p.stat().st_mtime_ns
+        for p in out.glob("**/*.json")
+        if p.relative_to(out) in first
+    } == first
     assert [r["id"] for r in summary(out)] == [r["id"] for r in records]
 
 
 def test_plan_many_returns_the_plans_in_request_order() -> None:
-    records = [{"robot": "two_link", "q0": np.array([0.7, -1.5]), "qe": qe, "max_iterations": 1}
-               for qe in ([-1.5, 0.0], (0.3, 0.2), np.array([1.0, -0.5]))]
+    records = [
+        {"robot": "two_link", "q0": np.array([0.7, -1.5]), "qe": qe, "max_iterations": 1}
+        for qe in ([-1.5, 0.0], (0.3, 0.2), np.array([1.0, -0.5]))
+    ]
     records.insert(1, {"id": "wrong", "robot": "two_link", "q0": [0, 0], "qe": [1, 2, 3]})
     outcomes = plan_many(records, workers=2)
     assert [o.id for o in outcomes] == ["m0", "wrong", "m2", "m3"]
     assert outcomes[1].status == OutcomeStatus.FAILED and "qe" in outcomes[1].error
     robot = load("two_link")
-    for outcome, record in zip(outcomes[::2] + outcomes[3:], records[::2] + records[3:],
-                               strict=True):
+    for outcome, record in zip(
+        outcomes[::2] + outcomes[3:], records[::2] + records[3:], strict=True
+    ):
         assert outcome.status == OutcomeStatus.PLANNED
         assert isinstance(outcome.result, nearopt.PlanResult)
-        np.testing.assert_allclose(outcome.result.trajectory(outcome.te, 0)[0],
-                                   np.asarray(record["qe"]), atol=1e-9)
-        report = nearopt.verify(outcome.result.trajectory, robot, q0=record["q0"],
-                                qe=record["qe"], cost=outcome.result.cost, J=outcome.J)
+        np.testing.assert_allclose(
+            outcome.result.trajectory(outcome.te, 0)[0], np.asarray(record["qe"]), atol=1e-9
+        )
+        report = nearopt.verify(
+            outcome.result.trajectory,
+            robot,
+            q0=record["q0"],
+            qe=record["qe"],
+            cost=outcome.result.cost,
+            J=outcome.J,
+        )
         assert report.passed, str(report)
 
 
@@ -266,17 +343,33 @@ def test_bad_motion_files_are_one_line_errors(tmp_path: Path) -> None:
             read_requests(tmp_path / "m.jsonl")
         run = batch(str(tmp_path / "m.jsonl"), "--out", str(tmp_path / "out"), timeout=120)
         assert run.returncode == 2 and "Traceback" not in run.stderr
-    for options, message in (({"json": "x.json"}, "writes every motion"),
-                             ({"colour": 1}, "unknown option 'colour'"),
-                             ({"q0": {"a": 1}}, "option values"),
-                             ({"via": [0.1, 0.2]}, "list of lists")):
+    for options, message in (
+        ({"json": "x.json"}, "writes every motion"),
+        ({"colour": 1}, "unknown option 'colour'"),
+        ({"q0": {"a": 1}}, "option values"),
+        ({"via": [0.1, 0.2]}, "list of lists"),
+    ):
         with pytest.raises(nearopt.ConfigurationError, match=message):
             MotionRequest("m", options).plan_request()
     with pytest.raises(nearopt.ConfigurationError, match="option values"):  # not repeatable
         MotionRequest("m", {"q0": [[0, 0], [0.3, 0.3]]}).plan_request()
     with pytest.raises(nearopt.ConfigurationError, match="--q0 is given twice"):
-        nearopt.cli.parse_plan(["plan", "--robot", "two_link", "--q0", "0", "0", "--q0", "0.3",
-                                "0.3", "--qe", "1", "1"])
+        nearopt.cli.parse_plan(
+            [
+                "plan",
+                "--robot",
+                "two_link",
+                "--q0",
+                "0",
+                "0",
+                "--q0",
+                "0.3",
+                "0.3",
+                "--qe",
+                "1",
+                "1",
+            ]
+        )
     (tmp_path / "file").write_text("")
     with pytest.raises(nearopt.ConfigurationError, match="not a folder"):
         run_batch([MotionRequest("m", {})], tmp_path / "file")
@@ -287,12 +380,26 @@ def test_a_changed_input_file_or_rate_is_planned_again(tmp_path: Path) -> None:
     it names and the same rate; a failure and a planned motion whose ids look alike keep their
     own files."""
     task = tmp_path / "t.toml"
-    task.write_text('[[target]]\nq = [0.2, -0.3]\n')
-    records = [{"id": "t1", "robot": "two_link", "q0": [0, 0], "task": "t.toml",
-                "max_iterations": 1, "grid": 60},
-               {"id": "m", "robot": "two_link", "q0": [0, 0], "qe": [0.5, 0.5, 9]},
-               {"id": "m.failed", "robot": "two_link", "q0": [0, 0], "qe": [0.5, 0.5],
-                "max_iterations": 1, "grid": 60}]
+    task.write_text("[[target]]\nq = [0.2, -0.3]\n")
+    records = [
+        {
+            "id": "t1",
+            "robot": "two_link",
+            "q0": [0, 0],
+            "task": "t.toml",
+            "max_iterations": 1,
+            "grid": 60,
+        },
+        {"id": "m", "robot": "two_link", "q0": [0, 0], "qe": [0.5, 0.5, 9]},
+        {
+            "id": "m.failed",
+            "robot": "two_link",
+            "q0": [0, 0],
+            "qe": [0.5, 0.5],
+            "max_iterations": 1,
+            "grid": 60,
+        },
+    ]
     requests = read_requests(write_motions(tmp_path, records))
     out = tmp_path / "out"
     with LocalPool(1) as pool:
@@ -300,11 +407,12 @@ def test_a_changed_input_file_or_rate_is_planned_again(tmp_path: Path) -> None:
         assert first.failed == 1 and (out / "m.failed.json").exists()
         assert (out / "failed" / "m.json").exists()
         assert run_batch(requests, out, pool).skipped == 3
-        task.write_text('[[target]]\nq = [-0.8, -0.9]\n')
+        task.write_text("[[target]]\nq = [-0.8, -0.9]\n")
         again = run_batch(requests, out, pool)
         assert again.skipped == 2
-        np.testing.assert_allclose(json.loads((out / "t1.json").read_text())["q"][-1],
-                                   [-0.8, -0.9], atol=1e-9)
+        np.testing.assert_allclose(
+            json.loads((out / "t1.json").read_text())["q"][-1], [-0.8, -0.9], atol=1e-9
+        )
         assert run_batch(requests, out, pool, rate=500.0).skipped == 0
         assert run_batch(requests, out, pool, rate=500.0).skipped == 3  # now done at 500 Hz
     doc = json.loads((out / "t1.json").read_text())

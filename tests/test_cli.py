@@ -32,12 +32,39 @@ def run(*args: str) -> subprocess.CompletedProcess[str]:
 def test_plan_writes_the_documented_json(tmp_path: Path, mode: list[str]) -> None:
     target = tmp_path / "plan.json"
     table = tmp_path / "plan.csv"
-    done = run_cli("plan", *PAPER, "--beta", "0.03", "--grid", "100", "--max-iterations", "20",
-               "--quiet", "--json", str(target), "--csv", str(table), "--rate", "500", *mode)
+    done = run_cli(
+        "plan",
+        *PAPER,
+        "--beta",
+        "0.03",
+        "--grid",
+        "100",
+        "--max-iterations",
+        "20",
+        "--quiet",
+        "--json",
+        str(target),
+        "--csv",
+        str(table),
+        "--rate",
+        "500",
+        *mode,
+    )
     assert done.returncode == 0, done.stderr
     doc = json.loads(target.read_text())
-    assert set(doc) == {"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
-                        "tau", "history"}
+    assert set(doc) == {
+        "robot",
+        "joint_names",
+        "cost",
+        "J",
+        "duration",
+        "t",
+        "q",
+        "qd",
+        "qdd",
+        "tau",
+        "history",
+    }
     assert doc["robot"] == "two_link" and doc["joint_names"] == ["joint1", "joint2"]
     t = np.array(doc["t"])
     # 500 Hz from 0 to te inclusive
@@ -58,18 +85,36 @@ def test_plan_writes_the_documented_json(tmp_path: Path, mode: list[str]) -> Non
     assert (len(history) == 1) == bool(mode)
     # the CSV holds the same samples, with a header row
     header, *rows = table.read_text().splitlines()
-    assert header.split(",") == ["t"] + [f"{k}_joint{i}" for k in ("q", "qd", "qdd", "tau")
-                                         for i in (1, 2)]
+    assert header.split(",") == ["t"] + [
+        f"{k}_joint{i}" for k in ("q", "qd", "qdd", "tau") for i in (1, 2)
+    ]
     values = np.array([[float(x) for x in row.split(",")] for row in rows])
     np.testing.assert_array_equal(values, np.column_stack([t, q, qd, qdd, tau]))
 
 
 def test_plots_and_html_are_written(tmp_path: Path) -> None:
-    done = run_cli("plan", *PAPER, "--beta", "0.03", "--grid", "40", "--max-iterations", "3",
-               "--quiet", "--plots", str(tmp_path / "figures"), "--html", str(tmp_path / "a.html"))
+    done = run_cli(
+        "plan",
+        *PAPER,
+        "--beta",
+        "0.03",
+        "--grid",
+        "40",
+        "--max-iterations",
+        "3",
+        "--quiet",
+        "--plots",
+        str(tmp_path / "figures"),
+        "--html",
+        str(tmp_path / "a.html"),
+    )
     assert done.returncode == 0, done.stderr
     assert sorted(p.name for p in (tmp_path / "figures").iterdir()) == [
-        "history.png", "speeds.png", "torques.png", "workspace.png"]
+        "history.png",
+        "speeds.png",
+        "torques.png",
+        "workspace.png",
+    ]
     assert "MeshCat.Viewer" in (tmp_path / "a.html").read_text()
 
 
@@ -82,16 +127,58 @@ def test_plots_and_html_are_written(tmp_path: Path) -> None:
         (["--robot", "two_link", "--q0", "0", "0", "--qe", "0", "0"], "zero-length"),
         (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--beta", "-1"], "beta"),
         (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--rate", "0"], "--rate"),
-        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--json",
-          "/nonexistent/x.json"], "does not exist"),
+        (
+            [
+                "--robot",
+                "two_link",
+                "--q0",
+                "0",
+                "0",
+                "--qe",
+                "1",
+                "1",
+                "--json",
+                "/nonexistent/x.json",
+            ],
+            "does not exist",
+        ),
         (["--urdf", "/nonexistent.urdf", "--q0", "0", "--qe", "1"], "not found"),
-        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--beta", "1",
-          "--time-optimal"], "not allowed with"),
+        (
+            [
+                "--robot",
+                "two_link",
+                "--q0",
+                "0",
+                "0",
+                "--qe",
+                "1",
+                "1",
+                "--beta",
+                "1",
+                "--time-optimal",
+            ],
+            "not allowed with",
+        ),
         (["--q0", "0", "--qe", "1"], "one of the arguments --robot --urdf is required"),
-        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--plots",
-          "/nonexistent/figures"], "does not exist"),
-        (["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--csv", "/"],
-         "is a directory"),
+        (
+            [
+                "--robot",
+                "two_link",
+                "--q0",
+                "0",
+                "0",
+                "--qe",
+                "1",
+                "1",
+                "--plots",
+                "/nonexistent/figures",
+            ],
+            "does not exist",
+        ),
+        (
+            ["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1", "--csv", "/"],
+            "is a directory",
+        ),
     ],
 )
 def test_bad_arguments_give_one_line_and_exit_code_2(args: list[str], expected: str) -> None:
@@ -116,8 +203,9 @@ def test_console_script_is_installed() -> None:
     assert script.value == "nearopt.cli:main"
 
 
-def replay_defects(robot, t: np.ndarray, q: np.ndarray, qd: np.ndarray,
-                   tau: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def replay_defects(
+    robot, t: np.ndarray, q: np.ndarray, qd: np.ndarray, tau: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Each sample period replayed: from the sampled state, the sampled torques (linear in between)
     integrated with ABA (RK4, 8 steps); the largest position and speed defects at the next sample
     per period, each (M − 1,)."""
@@ -156,8 +244,18 @@ def test_acceleration_limits_make_the_1khz_record_faithful(tmp_path: Path, name:
     limit, h = 10.0, 1e-3
     for extra in (["--acceleration-limit", str(limit)], []):
         target = tmp_path / "plan.json"
-        done = run_cli("plan", "--robot", name, *ends, "--max-iterations", "5", "--quiet",
-                   "--json", str(target), *extra)
+        done = run_cli(
+            "plan",
+            "--robot",
+            name,
+            *ends,
+            "--max-iterations",
+            "5",
+            "--quiet",
+            "--json",
+            str(target),
+            *extra,
+        )
         assert done.returncode == 0, done.stderr
         doc = json.loads(target.read_text())
         t, q, qd, qdd, tau = (np.array(doc[k]) for k in ("t", "q", "qd", "qdd", "tau"))
@@ -176,8 +274,11 @@ SHIPPED = {  # URDFs of example-robot-data as users have them, the options they 
     # effort limit with the arm held out sideways, so its motion stays low)
     "talos_left_arm": ("talos_data/robots/talos_left_arm.urdf", [], (0.1, 0.4)),
     "so100": ("so_arm_description/urdf/so100.urdf", [], (0.3, 0.7)),
-    "double_pendulum": ("double_pendulum_description/urdf/double_pendulum.urdf",
-                        ["--effort-limit", "2"], (0.3, 0.7)),
+    "double_pendulum": (
+        "double_pendulum_description/urdf/double_pendulum.urdf",
+        ["--effort-limit", "2"],
+        (0.3, 0.7),
+    ),
     "tiago_arm": ("tiago_description/robots/tiago.urdf", ["--tip", "arm_7_link"], (0.3, 0.7)),
 }
 
@@ -189,15 +290,29 @@ def test_shipped_urdfs_plan_from_the_command_line(tmp_path: Path, name: str) -> 
     relative, options, (start, end) = SHIPPED[name]
     path = erd_urdf(relative)
     robot = nearopt.Robot.from_urdf(
-        path, effort_limit=2.0 if "--effort-limit" in options else None,
+        path,
+        effort_limit=2.0 if "--effort-limit" in options else None,
         tip="arm_7_link" if "--tip" in options else None,
     )
     lo = np.maximum(robot.limits.position_lower, -np.pi)
     hi = np.minimum(robot.limits.position_upper, np.pi)
     q0, qe = lo + start * (hi - lo), lo + end * (hi - lo)
     target = tmp_path / "plan.json"
-    done = run_cli("plan", "--urdf", str(path), *options, "--q0", *map(str, q0), "--qe",
-               *map(str, qe), "--max-iterations", "4", "--quiet", "--json", str(target))
+    done = run_cli(
+        "plan",
+        "--urdf",
+        str(path),
+        *options,
+        "--q0",
+        *map(str, q0),
+        "--qe",
+        *map(str, qe),
+        "--max-iterations",
+        "4",
+        "--quiet",
+        "--json",
+        str(target),
+    )
     assert done.returncode == 0, done.stderr
     doc = json.loads(target.read_text())
     assert doc["joint_names"] == list(robot.joint_names)

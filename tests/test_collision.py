@@ -33,10 +33,13 @@ from nearopt.path import StraightPath
 
 ARMS = ["ur5", "panda", "xarm7", "kinova", "z1"]
 
-CELL = Scene((
-    Obstacle("table", Box((1.2, 1.2, 0.04)), (0.3, 0.0, -0.03)),
-    Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5)),
-), margin=0.01)
+CELL = Scene(
+    (
+        Obstacle("table", Box((1.2, 1.2, 0.04)), (0.3, 0.0, -0.03)),
+        Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5)),
+    ),
+    margin=0.01,
+)
 
 # start and goal on either side of the post, the straight line through it
 MOTIONS = {
@@ -74,8 +77,15 @@ def dense_min_distance(cm: CollisionModel, trajectory: nearopt.Trajectory) -> tu
 @pytest.mark.parametrize("name", ARMS)
 def test_distance_gradients_match_central_differences(name: str, rng: np.random.Generator) -> None:
     robot = load(name)
-    cm = CollisionModel(robot, Scene((Obstacle("ball", Sphere(0.1), (0.4, 0.2, 0.4)),
-                                      Obstacle("floor", HalfSpace((0, 0, 1), -0.3)))))
+    cm = CollisionModel(
+        robot,
+        Scene(
+            (
+                Obstacle("ball", Sphere(0.1), (0.4, 0.2, 0.4)),
+                Obstacle("floor", HalfSpace((0, 0, 1), -0.3)),
+            )
+        ),
+    )
     checked = 0
     for _ in range(8):
         q = random_configuration(robot, rng)
@@ -91,8 +101,9 @@ def test_distance_gradients_match_central_differences(name: str, rng: np.random.
         smooth = np.abs(grad - central) <= tol
         # where a face, edge or vertex of a hull takes over within ±h, d has a kink: the
         # one-sided slopes bracket the gradient of the nearest points found
-        bracket = ((grad >= np.minimum(forward, backward) - tol)
-                   & (grad <= np.maximum(forward, backward) + tol))
+        bracket = (grad >= np.minimum(forward, backward) - tol) & (
+            grad <= np.maximum(forward, backward) + tol
+        )
         assert np.all((smooth | bracket)[separated]), (name, np.abs(grad - central).max())
         assert np.mean(smooth[separated]) > 0.9
         checked += int(separated.sum())
@@ -100,12 +111,14 @@ def test_distance_gradients_match_central_differences(name: str, rng: np.random.
 
 
 @pytest.mark.parametrize("name", ["ur5", "panda"])
-def test_the_distance_to_a_floor_is_the_lowest_hull_vertex(name: str, rng: np.random.Generator
-                                                           ) -> None:
+def test_the_distance_to_a_floor_is_the_lowest_hull_vertex(
+    name: str, rng: np.random.Generator
+) -> None:
     robot = load(name)
     floor = -0.5
-    cm = CollisionModel(robot, Scene((Obstacle("floor", HalfSpace((0, 0, 1), floor)),)),
-                        self_collision=False)
+    cm = CollisionModel(
+        robot, Scene((Obstacle("floor", HalfSpace((0, 0, 1), floor)),)), self_collision=False
+    )
     raw = robot.collision_geometry()
     data = robot.model.createData()
     for _ in range(5):
@@ -130,8 +143,10 @@ def test_the_distance_to_a_floor_is_the_lowest_hull_vertex(name: str, rng: np.ra
 def test_pairs_exclude_adjacent_links_and_the_srdf_s_disabled_pairs() -> None:
     robot = load("panda")
     cm = CollisionModel(robot)
-    disabled = {frozenset((e.get("link1"), e.get("link2")))
-                for e in ET.parse(robot.srdf).getroot().iter("disable_collisions")}
+    disabled = {
+        frozenset((e.get("link1"), e.get("link2")))
+        for e in ET.parse(robot.srdf).getroot().iter("disable_collisions")
+    }
     names = {str(p) for p in cm.pairs}
     assert names and not any(frozenset((p.first, p.second)) in disabled for p in cm.pairs)
     assert "panda_link1 ↔ panda_link2" not in names  # adjacent
@@ -143,6 +158,7 @@ def test_pairs_exclude_adjacent_links_and_the_srdf_s_disabled_pairs() -> None:
 
 def _empty_srdf(robot: nearopt.Robot) -> str:
     import tempfile
+
     f = tempfile.NamedTemporaryFile("w", suffix=".srdf", delete=False)
     f.write(f'<robot name="{robot.name}"></robot>')
     f.close()
@@ -161,9 +177,12 @@ def test_a_thin_wall_between_checks_is_not_tunnelled_through() -> None:
     tip = robot.frame_position(line([s_wall])[0], "wrist_3_link")
     angle = np.arctan2(tip[1], tip[0])
     radius = np.hypot(tip[0], tip[1])
-    wall = Obstacle("wall", Box((0.06, 0.004, 0.06)),
-                    (radius * np.cos(angle), radius * np.sin(angle), tip[2]),
-                    (0.0, 0.0, angle))  # thin along the motion
+    wall = Obstacle(
+        "wall",
+        Box((0.06, 0.004, 0.06)),
+        (radius * np.cos(angle), radius * np.sin(angle), tip[2]),
+        (0.0, 0.0, angle),
+    )  # thin along the motion
     cm = CollisionModel(robot, Scene((wall,), margin=0.0), self_collision=False)
     sampled = np.array([cm.distances(q) for q in line(np.linspace(0, 1, 9))])
     assert sampled.min() > 0.0  # the 8 checks alone see no contact
@@ -173,9 +192,11 @@ def test_a_thin_wall_between_checks_is_not_tunnelled_through() -> None:
     assert not clearance.certified
     assert clearance.closest.distance < 0.0 and "wall" in str(clearance.closest.pair)
     # without the wall the same check certifies the path, and the dense samples agree
-    far = CollisionModel(robot, Scene((Obstacle("wall", Box((0.3, 0.004, 0.3)),
-                                                (3.0, 3.0, 0.0)),), margin=0.0),
-                         self_collision=False)
+    far = CollisionModel(
+        robot,
+        Scene((Obstacle("wall", Box((0.3, 0.004, 0.3)), (3.0, 3.0, 0.0)),), margin=0.0),
+        self_collision=False,
+    )
     assert far.path_clearance(line, samples=8).certified
 
 
@@ -232,10 +253,14 @@ def test_self_collision_is_avoided_where_the_free_optimum_collides() -> None:
 def test_a_start_in_collision_names_the_pair_and_the_depth() -> None:
     robot = load("ur5")
     q0, qe = (np.array(v) for v in MOTIONS["ur5"])
-    inside = Scene((Obstacle("block", Box((0.3, 0.3, 0.3)),
-                             tuple(robot.frame_position(q0, "wrist_2_link"))),))
-    with pytest.raises(CollisionError, match=r"start configuration q0 collides: .*block "
-                                             r"penetrates by \d+\.\d mm") as info:
+    inside = Scene(
+        (Obstacle("block", Box((0.3, 0.3, 0.3)), tuple(robot.frame_position(q0, "wrist_2_link"))),)
+    )
+    with pytest.raises(
+        CollisionError,
+        match=r"start configuration q0 collides: .*block "
+        r"penetrates by \d+\.\d mm",
+    ) as info:
         plan(robot, q0, qe, scene=inside)
     assert info.value.distance < 0 and "block" in info.value.pair
 
@@ -303,34 +328,53 @@ def test_a_scene_file_is_read_with_every_shape(tmp_path) -> None:  # noqa: ANN00
     _fixture_stl(tmp_path)
     scene = Scene.from_file(tmp_path / "cell.toml")
     assert scene.margin == 0.02 and [o.name for o in scene.obstacles] == [
-        "table", "post", "ball", "bar", "floor", "fixture"]
+        "table",
+        "post",
+        "ball",
+        "bar",
+        "floor",
+        "fixture",
+    ]
     floor = scene.obstacles[4].shape
     assert floor.normal == (0.0, 0.0, 1.0) and floor.offset == pytest.approx(-0.02)
     cm = CollisionModel(load("ur5"), scene)
     fixture = cm.geometry.geometryObjects[cm.geometry.getGeometryId("obstacle:fixture")]
     fixture.geometry.computeLocalAABB()
-    assert np.allclose(np.ptp(np.array([fixture.geometry.aabb_local.min_,
-                                        fixture.geometry.aabb_local.max_]), axis=0),
-                       [0.1, 0.05, 0.02], atol=1e-9)
+    assert np.allclose(
+        np.ptp(
+            np.array([fixture.geometry.aabb_local.min_, fixture.geometry.aabb_local.max_]), axis=0
+        ),
+        [0.1, 0.05, 0.02],
+        atol=1e-9,
+    )
 
 
-@pytest.mark.parametrize(("text", "obstacle", "field"), [
-    ('[[obstacle]]\nname = "t"\nbox = [1.0, 0.8]\n', "t", "box"),
-    ('[[obstacle]]\nname = "t"\nbox = [1.0, -0.8, 0.1]\n', "t", "box"),
-    ('[[obstacle]]\nname = "t"\nsphere = "big"\n', "t", "sphere"),
-    ('[[obstacle]]\nname = "t"\nbox = [1, 1, 1]\nsphere = 0.2\n', "t", "shape"),
-    ('[[obstacle]]\nname = "t"\n', "t", "shape"),
-    ('[[obstacle]]\nname = "t"\nsphere = 0.1\ncolour = "red"\n', "t", "colour"),
-    ('[[obstacle]]\nname = "t"\nsphere = 0.1\nposition = [0, 0]\n', "t", "position"),
-    ('[[obstacle]]\nname = "t"\nhalfspace = [0, 0, 0, 1]\n', "t", "halfspace"),
-    ('[[obstacle]]\nname = "t"\nmesh = "missing.stl"\n', "t", "mesh"),
-    ('[[obstacle]]\nname = "t"\nsphere = 0.1\n[[obstacle]]\nname = "t"\nsphere = 0.2\n', "t",
-     "name"),
-    ("margin = -0.01\n", None, "margin"),
-    ("margins = 0.01\n", None, "margins"),
-])
+@pytest.mark.parametrize(
+    ("text", "obstacle", "field"),
+    [
+        ('[[obstacle]]\nname = "t"\nbox = [1.0, 0.8]\n', "t", "box"),
+        ('[[obstacle]]\nname = "t"\nbox = [1.0, -0.8, 0.1]\n', "t", "box"),
+        ('[[obstacle]]\nname = "t"\nsphere = "big"\n', "t", "sphere"),
+        ('[[obstacle]]\nname = "t"\nbox = [1, 1, 1]\nsphere = 0.2\n', "t", "shape"),
+        ('[[obstacle]]\nname = "t"\n', "t", "shape"),
+        ('[[obstacle]]\nname = "t"\nsphere = 0.1\ncolour = "red"\n', "t", "colour"),
+        ('[[obstacle]]\nname = "t"\nsphere = 0.1\nposition = [0, 0]\n', "t", "position"),
+        ('[[obstacle]]\nname = "t"\nhalfspace = [0, 0, 0, 1]\n', "t", "halfspace"),
+        ('[[obstacle]]\nname = "t"\nmesh = "missing.stl"\n', "t", "mesh"),
+        (
+            '[[obstacle]]\nname = "t"\nsphere = 0.1\n[[obstacle]]\nname = "t"\nsphere = 0.2\n',
+            "t",
+            "name",
+        ),
+        ("margin = -0.01\n", None, "margin"),
+        ("margins = 0.01\n", None, "margins"),
+    ],
+)
 def test_a_bad_scene_file_names_the_obstacle_and_the_field(
-    tmp_path, text: str, obstacle: str | None, field: str  # noqa: ANN001
+    tmp_path,
+    text: str,
+    obstacle: str | None,
+    field: str,  # noqa: ANN001
 ) -> None:
     path = tmp_path / "cell.toml"
     path.write_text(text)
@@ -343,25 +387,39 @@ def test_a_bad_scene_file_names_the_obstacle_and_the_field(
 def test_the_cli_refuses_a_bad_scene_in_one_line_and_writes_nothing(tmp_path) -> None:  # noqa: ANN001
     (tmp_path / "cell.toml").write_text('[[obstacle]]\nname = "post"\ncylinder = [0.05]\n')
     out = tmp_path / "plan.json"
-    run = run_cli("plan", "--robot", "ur5",
-                  "--q0", *map(str, MOTIONS["ur5"][0]), "--qe", *map(str, MOTIONS["ur5"][1]),
-                  "--scene", str(tmp_path / "cell.toml"), "--json", str(out), cwd=tmp_path)
+    run = run_cli(
+        "plan",
+        "--robot",
+        "ur5",
+        "--q0",
+        *map(str, MOTIONS["ur5"][0]),
+        "--qe",
+        *map(str, MOTIONS["ur5"][1]),
+        "--scene",
+        str(tmp_path / "cell.toml"),
+        "--json",
+        str(out),
+        cwd=tmp_path,
+    )
     assert run.returncode != 0 and not out.exists()
     lines = run.stderr.strip().splitlines()
     assert len(lines) == 1 and "'post'" in lines[0] and "cylinder" in lines[0], run.stderr
 
 
-@pytest.mark.parametrize("make", [
-    lambda: Obstacle("a", Box((0.1, 0.1))),
-    lambda: Obstacle("a", Box(1.0)),
-    lambda: Obstacle("a", Sphere("big")),
-    lambda: Obstacle("a", HalfSpace((0, 0, 1), None)),
-    lambda: Obstacle("", Sphere(0.1)),
-    lambda: Obstacle(5, Sphere(0.1)),
-    lambda: Scene(Obstacle("a", Sphere(0.1))),
-    lambda: Scene(None),
-    lambda: Scene.from_file(""),
-])
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: Obstacle("a", Box((0.1, 0.1))),
+        lambda: Obstacle("a", Box(1.0)),
+        lambda: Obstacle("a", Sphere("big")),
+        lambda: Obstacle("a", HalfSpace((0, 0, 1), None)),
+        lambda: Obstacle("", Sphere(0.1)),
+        lambda: Obstacle(5, Sphere(0.1)),
+        lambda: Scene(Obstacle("a", Sphere(0.1))),
+        lambda: Scene(None),
+        lambda: Scene.from_file(""),
+    ],
+)
 def test_bad_scene_records_in_python_are_scene_errors(make) -> None:  # noqa: ANN001
     with pytest.raises(SceneError):
         make()
@@ -376,8 +434,9 @@ def test_a_mesh_with_non_finite_vertices_is_refused(tmp_path, vertex: str) -> No
     k = next(i for i, line in enumerate(text) if line.strip().startswith("vertex"))
     text[k] = f"      vertex {vertex}"
     (tmp_path / "bad.stl").write_text("\n".join(text) + "\n")
-    (tmp_path / "cell.toml").write_text('[[obstacle]]\nname = "m"\nmesh = "bad.stl"\n'
-                                        'position = [2, 2, 2]\n')
+    (tmp_path / "cell.toml").write_text(
+        '[[obstacle]]\nname = "m"\nmesh = "bad.stl"\nposition = [2, 2, 2]\n'
+    )
     with pytest.raises(SceneError, match="'m'.*not finite"):
         CollisionModel(load("ur5"), Scene.from_file(tmp_path / "cell.toml"))
 

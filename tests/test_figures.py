@@ -68,11 +68,15 @@ def test_prismatic_joints_get_linear_units_and_acceleration_limits_their_figure(
 ) -> None:
     robot = nearopt.Robot.from_urdf(write_urdf(tmp_path, types=("prismatic", "revolute")))
     robot = robot.with_limits(acceleration=[2.0, np.inf])
-    traj = nearopt.optimal_timing(robot, nearopt.StraightPath([0.0, 0.0], [0.2, 0.3]),
-                                  grid=40).trajectory
+    traj = nearopt.optimal_timing(
+        robot, nearopt.StraightPath([0.0, 0.0], [0.2, 0.3]), grid=40
+    ).trajectory
     units = {"torque": plot_torques, "speed": plot_speeds, "acceleration": plot_accelerations}
-    expected = {"torque": ("[N]", "[N·m]"), "speed": ("[m/s]", "[rad/s]"),
-                "acceleration": ("[m/s²]", "[rad/s²]")}
+    expected = {
+        "torque": ("[N]", "[N·m]"),
+        "speed": ("[m/s]", "[rad/s]"),
+        "acceleration": ("[m/s²]", "[rad/s²]"),
+    }
     for kind, plot in units.items():
         fig = plot(robot, traj, rate=500.0)
         assert tuple(ax.get_ylabel().split("\n")[1] for ax in fig.axes) == expected[kind]
@@ -86,11 +90,13 @@ def test_planar_workspace_plot_is_in_the_arm_plane_with_the_tip_path(
     paper_plan: nearopt.PlanResult,
 ) -> None:
     robot = paper_plan.robot
-    fig = plot_workspace(robot, {"initial": paper_plan.initial.trajectory,
-                                 "final": paper_plan.trajectory})
+    fig = plot_workspace(
+        robot, {"initial": paper_plan.initial.trajectory, "final": paper_plan.trajectory}
+    )
     assert [ax.name for ax in fig.axes] == ["rectilinear", "rectilinear"]
-    for ax, traj in zip(fig.axes, (paper_plan.initial.trajectory, paper_plan.trajectory),
-                        strict=True):
+    for ax, traj in zip(
+        fig.axes, (paper_plan.initial.trajectory, paper_plan.trajectory), strict=True
+    ):
         tip = [line for line in ax.get_lines() if line.get_label() == "tip path"][0]
         xy = tip.get_xydata()
         world = robot.frame_position(traj(np.linspace(0, traj.duration, len(xy)), 0))
@@ -109,12 +115,14 @@ def test_a_planar_arm_s_workspace_shows_the_obstacles_sections(
     √(3² − 1²) cm; a box crossing the plane in a rectangle; a floor as the region below it."""
     from nearopt.collision import Box, HalfSpace, Obstacle, Scene, Sphere
 
-    scene = Scene((
-        Obstacle("ball", Sphere(0.03), (-0.14, 0.01, -0.1)),
-        Obstacle("block", Box((0.1, 0.2, 0.04)), (0.1, 0.0, -0.05)),
-        Obstacle("floor", HalfSpace((0.0, 0.0, 1.0), -0.15)),
-        Obstacle("away", Sphere(0.03), (0.0, 0.5, 0.0)),  # does not cross the plane
-    ))
+    scene = Scene(
+        (
+            Obstacle("ball", Sphere(0.03), (-0.14, 0.01, -0.1)),
+            Obstacle("block", Box((0.1, 0.2, 0.04)), (0.1, 0.0, -0.05)),
+            Obstacle("floor", HalfSpace((0.0, 0.0, 1.0), -0.15)),
+            Obstacle("away", Sphere(0.03), (0.0, 0.5, 0.0)),  # does not cross the plane
+        )
+    )
     fig = plot_workspace(paper_plan.robot, {"final": paper_plan.trajectory}, scene=scene)
     ax = fig.axes[0]
     assert len(ax.patches) == 3  # the one away from the plane is not drawn
@@ -122,15 +130,19 @@ def test_a_planar_arm_s_workspace_shows_the_obstacles_sections(
     ball, block, floor = (p.get_xy() for p in ax.patches[:3])
     radius = np.linalg.norm(ball - [-0.14, -0.1], axis=1)
     np.testing.assert_allclose(radius, np.sqrt(0.03**2 - 0.01**2), rtol=0.02)
-    np.testing.assert_allclose([block[:, 0].min(), block[:, 0].max(), block[:, 1].min(),
-                                block[:, 1].max()], [0.05, 0.15, -0.07, -0.03], atol=1e-9)
+    np.testing.assert_allclose(
+        [block[:, 0].min(), block[:, 0].max(), block[:, 1].min(), block[:, 1].max()],
+        [0.05, 0.15, -0.07, -0.03],
+        atol=1e-9,
+    )
     assert floor[:, 1].max() == pytest.approx(-0.15, abs=1e-9)
 
 
 def test_spatial_arm_gets_a_3d_workspace_plot() -> None:
     robot = load("ur5")
-    traj = nearopt.optimal_timing(robot, nearopt.StraightPath(np.zeros(6), np.full(6, 0.5)),
-                                  grid=40).trajectory
+    traj = nearopt.optimal_timing(
+        robot, nearopt.StraightPath(np.zeros(6), np.full(6, 0.5)), grid=40
+    ).trajectory
     fig = plot_workspace(robot, {"line": traj})
     ax = fig.axes[0]
     assert ax.name == "3d"
@@ -151,6 +163,10 @@ def test_history_plot_and_files(paper_plan: nearopt.PlanResult, tmp_path: Path) 
     np.testing.assert_array_equal(paper.get_xydata(), [[row.index, row.J] for row in TABLE_2])
     assert paper.get_label() == "paper, Table 2" and fig.axes[0].get_ylabel() == "$J^j$"
     written = save_figures(paper_plan, tmp_path / "figures")
-    assert [p.name for p in written] == ["torques.png", "speeds.png", "workspace.png",
-                                         "history.png"]
+    assert [p.name for p in written] == [
+        "torques.png",
+        "speeds.png",
+        "workspace.png",
+        "history.png",
+    ]
     assert all(p.stat().st_size > 10_000 and p.read_bytes()[:4] == b"\x89PNG" for p in written)

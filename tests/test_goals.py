@@ -28,8 +28,9 @@ def pose_of(robot: nearopt.Robot, q: np.ndarray, frame: str | None = None) -> To
 
 
 @pytest.mark.parametrize("name", ["ur5", "panda", "xarm7", "kinova"])
-def test_inverse_kinematics_reaches_poses_within_the_limits(name: str,
-                                                           rng: np.random.Generator) -> None:
+def test_inverse_kinematics_reaches_poses_within_the_limits(
+    name: str, rng: np.random.Generator
+) -> None:
     robot = load(name)
     lim = robot.limits
     for _ in range(5):
@@ -41,17 +42,30 @@ def test_inverse_kinematics_reaches_poses_within_the_limits(name: str,
 
 
 @pytest.mark.parametrize("name", ["ur5", "panda"])
-def test_a_plan_to_a_tool_pose_ends_there(name: str, rng: np.random.Generator,
-                                          tmp_path: Path) -> None:
+def test_a_plan_to_a_tool_pose_ends_there(
+    name: str, rng: np.random.Generator, tmp_path: Path
+) -> None:
     """Through the CLI; the last sample of the JSON is checked by forward kinematics."""
     robot = load(name)
     q0 = random_configuration(robot, rng)
     target = pose_of(robot, random_configuration(robot, rng))
     out = tmp_path / "plan.json"
-    run = run_cli("plan", "--robot", name,
-                  "--q0", *map(str, q0), "--goal-pose", *map(str, target.position),
-                  *map(str, target.quaternion), "--time-optimal", "--grid", "100", "--quiet",
-                  "--json", str(out))
+    run = run_cli(
+        "plan",
+        "--robot",
+        name,
+        "--q0",
+        *map(str, q0),
+        "--goal-pose",
+        *map(str, target.position),
+        *map(str, target.quaternion),
+        "--time-optimal",
+        "--grid",
+        "100",
+        "--quiet",
+        "--json",
+        str(out),
+    )
     assert run.returncode == 0, run.stderr
     q = np.array(json.loads(out.read_text())["q"])
     np.testing.assert_allclose(q[0], q0, atol=1e-12)
@@ -66,8 +80,7 @@ def test_a_position_only_goal_and_a_named_frame(rng: np.random.Generator) -> Non
     robot = load("panda")
     q0 = random_configuration(robot, rng)
     spot = robot.frame_position(random_configuration(robot, rng), "panda_link7")
-    result = nearopt.plan(robot, q0, ToolPose(spot, frame="panda_link7"), grid=60,
-                          max_iterations=3)
+    result = nearopt.plan(robot, q0, ToolPose(spot, frame="panda_link7"), grid=60, max_iterations=3)
     end = result.trajectory(np.array([result.duration]), 0)[0]
     assert np.linalg.norm(robot.frame_position(end, "panda_link7") - spot) < 1e-6
     assert result.goal is not None and result.goal.frame == "panda_link7"
@@ -78,8 +91,11 @@ def test_a_position_only_goal_and_a_named_frame(rng: np.random.Generator) -> Non
 
 def test_an_unreachable_pose_says_how_far_it_is() -> None:
     robot = load("ur5")
-    with pytest.raises(UnreachablePoseError, match=r"closest placement found is [\d.]+ m and "
-                                                   r"[\d.e-]+ rad away") as info:
+    with pytest.raises(
+        UnreachablePoseError,
+        match=r"closest placement found is [\d.]+ m and "
+        r"[\d.e-]+ rad away",
+    ) as info:
         nearopt.plan(robot, np.zeros(6), ToolPose((3.0, 0.0, 0.5), (0.0, 0.0, 0.0, 1.0)))
     # ur5 reaches about 0.95 m from its shoulder: the target is ≥ 1.9 m beyond
     assert 1.9 < info.value.distance < 2.3
@@ -102,25 +118,39 @@ def test_a_pose_reachable_only_outside_the_limits_is_refused() -> None:
 
 def test_an_unknown_frame_lists_the_frames() -> None:
     robot = load("ur5")
-    with pytest.raises(nearopt.ConfigurationError, match="no frame 'gripper'; its links: .*"
-                                                         "wrist_3_link"):
+    with pytest.raises(
+        nearopt.ConfigurationError, match="no frame 'gripper'; its links: .*wrist_3_link"
+    ):
         nearopt.plan(robot, np.zeros(6), ToolPose((0.4, 0.0, 0.4), frame="gripper"))
-    run = run_cli("plan", "--robot", "ur5", "--q0", *["0"] * 6,
-                  "--goal-pose", "0.4", "0", "0.4", "--frame", "gripper")
+    run = run_cli(
+        "plan",
+        "--robot",
+        "ur5",
+        "--q0",
+        *["0"] * 6,
+        "--goal-pose",
+        "0.4",
+        "0",
+        "0.4",
+        "--frame",
+        "gripper",
+    )
     lines = run.stderr.strip().splitlines()
     assert run.returncode == 2 and len(lines) == 1 and "tool0" in lines[0], run.stderr
 
 
-@pytest.mark.parametrize("args", [
-    ["--qe", *["0.1"] * 6, "--goal-pose", "0.4", "0", "0.4"],
-    ["--goal-pose", "0.4", "0"],
-    ["--frame", "tool0", "--qe", *["0.1"] * 6],
-    ["--qe", *["0.1"] * 6, "--via", "0", "0"],
-    ["--qe", *["0.1"] * 6, "--via", "9", "0", "0", "0", "0", "0"],
-])
+@pytest.mark.parametrize(
+    "args",
+    [
+        ["--qe", *["0.1"] * 6, "--goal-pose", "0.4", "0", "0.4"],
+        ["--goal-pose", "0.4", "0"],
+        ["--frame", "tool0", "--qe", *["0.1"] * 6],
+        ["--qe", *["0.1"] * 6, "--via", "0", "0"],
+        ["--qe", *["0.1"] * 6, "--via", "9", "0", "0", "0", "0", "0"],
+    ],
+)
 def test_bad_goal_and_via_options_get_one_line(args: list[str]) -> None:
-    run = run_cli("plan", "--robot", "ur5", "--q0", *["0"] * 6,
-                  *args)
+    run = run_cli("plan", "--robot", "ur5", "--q0", *["0"] * 6, *args)
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1, run.stderr
 
 
@@ -140,8 +170,9 @@ def test_the_goal_configuration_is_optimised_along_the_pose(rng: np.random.Gener
         for it in moved.history:
             distance, angle = pose_error(robot, it.path(np.array([it.path.s_end]))[0], goal)
             assert distance < 1e-9 and angle < 1e-9
-        report = nearopt.verify(moved.trajectory, robot, goal_pose=goal, cost=moved.cost,
-                                J=moved.J, simulate=False)
+        report = nearopt.verify(
+            moved.trajectory, robot, goal_pose=goal, cost=moved.cost, J=moved.J, simulate=False
+        )
         assert report.passed, report
     assert max(gains) > 0.01  # the freedom is worth something on some of them
 
@@ -154,8 +185,9 @@ def test_the_workspace_figure_marks_the_target() -> None:
 
     robot = load("ur5")
     goal = ToolPose((0.4, 0.2, 0.3))
-    result = nearopt.plan(robot, np.array([0.0, -1.2, 1.2, -1.5, -1.57, 0.0]), goal, grid=60,
-                          max_iterations=2)
+    result = nearopt.plan(
+        robot, np.array([0.0, -1.2, 1.2, -1.5, -1.57, 0.0]), goal, grid=60, max_iterations=2
+    )
     fig = plot_workspace(robot, {"final": result.trajectory}, targets=(goal,))
     star = [c for c in fig.axes[0].collections if c.get_label() == "target"][0]
     np.testing.assert_allclose(np.ravel(star._offsets3d), goal.position, atol=1e-12)
@@ -167,9 +199,24 @@ def test_via_points_are_passed_exactly_without_stopping(tmp_path: Path) -> None:
     q0, qe = [-0.8, -1.2, 1.2, -1.5, -1.57, 0.0], [0.8, -1.2, 1.2, -1.5, -1.57, 0.0]
     via = [0.0, -1.6, 0.8, -1.0, -1.57, 0.5]
     out = tmp_path / "via.json"
-    run = run_cli("plan", "--robot", "ur5", "--q0", *map(str, q0),
-                  "--qe", *map(str, qe), "--via", *map(str, via), "--beta", "0.001", "--quiet",
-                  "--rate", "2000", "--json", str(out))
+    run = run_cli(
+        "plan",
+        "--robot",
+        "ur5",
+        "--q0",
+        *map(str, q0),
+        "--qe",
+        *map(str, qe),
+        "--via",
+        *map(str, via),
+        "--beta",
+        "0.001",
+        "--quiet",
+        "--rate",
+        "2000",
+        "--json",
+        str(out),
+    )
     assert run.returncode == 0, run.stderr
     doc = json.loads(out.read_text())
     (mark,) = doc["via"]
@@ -183,23 +230,33 @@ def test_via_points_are_passed_exactly_without_stopping(tmp_path: Path) -> None:
     robot = load("panda")
     start = np.array([0.0, -0.5, 0.0, -2.0, 0.0, 1.5, 0.8])
     pose = pose_of(robot, np.array([0.6, -0.2, 0.3, -1.8, 0.1, 1.8, 0.5]))
-    result = nearopt.plan(robot, start, [1.0, 0.0, 0.5, -1.5, 0.0, 2.0, 0.0], via=[pose],
-                          grid=100, max_iterations=20)
+    result = nearopt.plan(
+        robot, start, [1.0, 0.0, 0.5, -1.5, 0.0, 2.0, 0.0], via=[pose], grid=100, max_iterations=20
+    )
     (tv,) = result.via_times
     at = result.trajectory(np.array([tv]), 0)[0]
     assert max(pose_error(robot, at, pose)) < 1e-9
     assert np.abs(result.trajectory(np.array([tv]), 1)[0]).max() > 0.1
     for it in result.history:
         assert max(pose_error(robot, it.path(np.array(result.via_s))[0], pose)) < 1e-9
-    assert_independent_checks(robot, result.trajectory, result.cost, result.J, start,
-                              np.array([1.0, 0.0, 0.5, -1.5, 0.0, 2.0, 0.0]))
+    assert_independent_checks(
+        robot,
+        result.trajectory,
+        result.cost,
+        result.J,
+        start,
+        np.array([1.0, 0.0, 0.5, -1.5, 0.0, 2.0, 0.0]),
+    )
 
 
 def test_bad_tool_poses_and_via_lists_are_configuration_errors() -> None:
     robot = load("ur5")
-    for make in (lambda: ToolPose("abc"), lambda: ToolPose((0.4j, 0.2, 0.3)),
-                 lambda: ToolPose((0.4, 0.2, 0.3), "abcd"),
-                 lambda: ToolPose((0.4, 0.2, 0.3), frame=5)):
+    for make in (
+        lambda: ToolPose("abc"),
+        lambda: ToolPose((0.4j, 0.2, 0.3)),
+        lambda: ToolPose((0.4, 0.2, 0.3), "abcd"),
+        lambda: ToolPose((0.4, 0.2, 0.3), frame=5),
+    ):
         with pytest.raises(nearopt.ConfigurationError):
             make()
     # a huge quaternion is the same orientation, not an overflow to zero

@@ -17,17 +17,36 @@ from checks import assert_independent_checks
 import nearopt
 from nearopt.planning import Iteration, StopReason
 
-PANDA = ["--robot", "panda", "--q0", "0", "-0.5", "0", "-2", "0", "1.5", "0.8",
-         "--qe", "1.2", "0.3", "0.5", "-1.2", "0.4", "2.2", "-0.3"]
+PANDA = [
+    "--robot",
+    "panda",
+    "--q0",
+    "0",
+    "-0.5",
+    "0",
+    "-2",
+    "0",
+    "1.5",
+    "0.8",
+    "--qe",
+    "1.2",
+    "0.3",
+    "0.5",
+    "-1.2",
+    "0.4",
+    "2.2",
+    "-0.3",
+]
 
 
-def interrupted_cli(*args: str, second_after: float | None = None
-                    ) -> tuple[int, list[str], str]:
+def interrupted_cli(*args: str, second_after: float | None = None) -> tuple[int, list[str], str]:
     """Run ``nearopt plan``; send SIGINT when iteration 1 is printed and, if ``second_after`` is
     given, again that many seconds after the status line. Exit code, stdout lines, stderr."""
     process = subprocess.Popen(
         [sys.executable, "-u", "-m", "nearopt.cli", "plan", *PANDA, *args],
-        stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
     lines = []
     assert process.stdout is not None and process.stderr is not None
@@ -63,12 +82,18 @@ def test_the_first_ctrl_c_writes_the_best_plan_so_far(tmp_path: Path) -> None:
 def test_a_second_ctrl_c_aborts_and_writes_nothing(tmp_path: Path) -> None:
     # the status line is printed before verification, figures and the page are made (seconds)
     code, lines, stderr = interrupted_cli(
-        "--json", str(tmp_path / "plan.json"), "--html", str(tmp_path / "plan.html"),
-        "--plots", str(tmp_path / "figures"), second_after=0.3,
+        "--json",
+        str(tmp_path / "plan.json"),
+        "--html",
+        str(tmp_path / "plan.html"),
+        "--plots",
+        str(tmp_path / "figures"),
+        second_after=0.3,
     )
     assert code == 130
-    assert stderr.strip().splitlines() == ["nearopt: error: aborted by a second Ctrl-C; "
-                                           "nothing written"]
+    assert stderr.strip().splitlines() == [
+        "nearopt: error: aborted by a second Ctrl-C; nothing written"
+    ]
     assert not any(line.startswith("wrote") for line in lines)
     assert [p.name for p in tmp_path.rglob("*") if p.is_file()] == []
 

@@ -56,8 +56,9 @@ def tree_robot() -> nearopt.Robot:
     n = model.nv
     free = np.full(n, np.inf)
     limits = JointLimits(-free, free, free, np.full(n, -5.0), np.full(n, 5.0), free)
-    return nearopt.Robot(model, limits=limits, damping=rng.uniform(0.0, 1.0, n), name="tree",
-                         tip="universe")
+    return nearopt.Robot(
+        model, limits=limits, damping=rng.uniform(0.0, 1.0, n), name="tree", tip="universe"
+    )
 
 
 def test_casadi_aba_handles_trees_and_unaligned_joints() -> None:
@@ -77,8 +78,9 @@ def test_assembled_derivatives_match_casadi(inner_rows: tuple[int, ...]) -> None
     for name, args in (("nlp_jac_g", [x, w]), ("nlp_hess_l", [x, w, 0.7, lam_g])):
         a = ours.solver.get_function(name)(*args)
         b = casadi.solver.get_function(name)(*args)
-        for u, v in zip(a if isinstance(a, tuple) else [a], b if isinstance(b, tuple) else [b],
-                        strict=True):
+        for u, v in zip(
+            a if isinstance(a, tuple) else [a], b if isinstance(b, tuple) else [b], strict=True
+        ):
             u, v = np.array(ca.densify(u)), np.array(ca.densify(v))
             assert np.allclose(u, v, rtol=1e-12, atol=1e-12 * np.max(np.abs(v))), name
 
@@ -99,17 +101,19 @@ def test_paper_two_link_example() -> None:
 # small motions of a 6- and a 7-joint arm where the speed limits bind (ur5) or the torques and
 # speeds both shape the optimum (panda): start and goal [rad], w of f0 = 1 + w Σ u² [1/(N·m)²]
 SMALL_MOTIONS = {
-    "ur5": (np.array([0.0, -1.2, 1.2, -1.5, -1.5, 0.0]),
-            np.array([0.3, -0.3, 0.3, 1.0, 1.0, 1.0])),
-    "panda": (np.array([0.0, -0.5, 0.0, -2.0, 0.0, 1.5, 0.8]),
-              np.array([0.4, 0.4, -0.4, 0.5, 0.6, 0.5, 0.6])),
+    "ur5": (np.array([0.0, -1.2, 1.2, -1.5, -1.5, 0.0]), np.array([0.3, -0.3, 0.3, 1.0, 1.0, 1.0])),
+    "panda": (
+        np.array([0.0, -0.5, 0.0, -2.0, 0.0, 1.5, 0.8]),
+        np.array([0.4, 0.4, -0.4, 0.5, 0.6, 0.5, 0.6]),
+    ),
 }
 SMALL_W = 0.001
 
 
 @pytest.fixture(scope="module", params=sorted(SMALL_MOTIONS))
-def small_motion(request: pytest.FixtureRequest) -> tuple[nearopt.Robot, np.ndarray, np.ndarray,
-                                                          ref.ReferenceSolution]:
+def small_motion(
+    request: pytest.FixtureRequest,
+) -> tuple[nearopt.Robot, np.ndarray, np.ndarray, ref.ReferenceSolution]:
     """The arm, θ0, θe and IPOPT's optimum (K = 30, two starts; 4 s on ur5, 7 s on panda)."""
     robot = load(request.param)
     q0, step = SMALL_MOTIONS[request.param]

@@ -31,9 +31,16 @@ def test_two_hundred_plans_neither_leak_nor_hang() -> None:
         cost = nearopt.TorqueCost(0.03) if k % 3 else nearopt.TimeCost()
         start = time.perf_counter()
         try:
-            result = nearopt.plan(robot, q0, qe, cost, grid=30,
-                                  options=nearopt.SCPOptions(control_points=4, grid=30),
-                                  max_iterations=4, time_limit=TIME_LIMIT)
+            result = nearopt.plan(
+                robot,
+                q0,
+                qe,
+                cost,
+                grid=30,
+                options=nearopt.SCPOptions(control_points=4, grid=30),
+                max_iterations=4,
+                time_limit=TIME_LIMIT,
+            )
             assert result.J <= result.initial.J
             outcomes["planned"] += 1
         except nearopt.InfeasiblePathError:
@@ -47,6 +54,8 @@ def test_two_hundred_plans_neither_leak_nor_hang() -> None:
     assert outcomes["planned"] >= PLANS // 2, outcomes
     # after a warm-up of 50 plans, 150 more may not grow the resident set by more than 20 MiB
     growth = memory[-1] - memory[1]
-    print(f"\n200 plans: {outcomes}, longest {longest:.2f} s, resident MiB every 25: "
-          f"{[round(m, 1) for m in memory]}")
+    print(
+        f"\n200 plans: {outcomes}, longest {longest:.2f} s, resident MiB every 25: "
+        f"{[round(m, 1) for m in memory]}"
+    )
     assert growth < 20.0, (memory, growth)

@@ -23,11 +23,18 @@ ROOT = os.geteuid() == 0
 NOBODY = 65534
 
 
-def run(*args: str, user: int | None = None, cwd: Path | None = None,
-        timeout: float = 300) -> subprocess.CompletedProcess[bytes]:
+def run(
+    *args: str, user: int | None = None, cwd: Path | None = None, timeout: float = 300
+) -> subprocess.CompletedProcess[bytes]:
     """The console script in a subprocess, optionally as another user (when run as root)."""
-    return subprocess.run([sys.executable, "-m", "nearopt.cli", *args], capture_output=True,
-                          timeout=timeout, cwd=cwd, user=user, group=user)
+    return subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", *args],
+        capture_output=True,
+        timeout=timeout,
+        cwd=cwd,
+        user=user,
+        group=user,
+    )
 
 
 def one_error_line(done: subprocess.CompletedProcess[bytes]) -> str:
@@ -86,8 +93,9 @@ def test_devices_stay_devices() -> None:
     ],
     ids=["same path", "stdout twice", "a link to the other"],
 )
-def test_two_outputs_to_one_place_are_refused(tmp_path: Path, outputs: list[str],
-                                              says: str) -> None:
+def test_two_outputs_to_one_place_are_refused(
+    tmp_path: Path, outputs: list[str], says: str
+) -> None:
     (tmp_path / "same").write_text("keep")
     (tmp_path / "link-to-same").symlink_to(tmp_path / "same")
     done = run(*STAGE1, *(o.format(p=tmp_path) for o in outputs))
@@ -153,8 +161,10 @@ def test_an_unprivileged_user_is_told_and_nothing_is_written() -> None:
         urdf.write_text(nearopt.Robot.from_name("two_link").urdf_path.read_text())
         urdf.chmod(0o644)
         request = ["plan", "--urdf", str(urdf), *STAGE1[3:]]
-        for target, says in ((folder / "new.json", "Permission denied"),
-                             (folder / "theirs.json", "permission denied")):
+        for target, says in (
+            (folder / "new.json", "Permission denied"),
+            (folder / "theirs.json", "permission denied"),
+        ):
             code, stderr = run_as_nobody(*request, "--json", str(target))
             lines = stderr.strip().splitlines()
             assert code == 2 and len(lines) == 1, stderr

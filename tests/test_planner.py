@@ -49,20 +49,24 @@ def test_row_path_jacobian_matches_finite_differences(name: str) -> None:
         for sign in (1.0, -1.0):
             moved = controls.copy()
             moved[j + 1, i] += sign * h
-            rebuilt = Discretisation(build_timing_problem(robot, nearopt.BSplinePath(moved),
-                                                         grid=60))
+            rebuilt = Discretisation(
+                build_timing_problem(robot, nearopt.BSplinePath(moved), grid=60)
+            )
             assert np.array_equal(rebuilt.joint, disc.joint)  # the same rows, in order
             values.append(rebuilt.values(z))
         fd = (values[0] - values[1]) / (2 * h)
         between = np.zeros(fd.size, dtype=bool)
-        for block in (disc.blocks.torque_between, disc.blocks.acceleration_between,
-                      disc.blocks.speed_between):
+        for block in (
+            disc.blocks.torque_between,
+            disc.blocks.acceleration_between,
+            disc.blocks.speed_between,
+        ):
             between[block] = True
         assert between.any()
-        np.testing.assert_allclose(jac[~between, column], fd[~between],
-                                   atol=1e-7 * np.abs(jac).max())
-        np.testing.assert_allclose(jac[between, column], fd[between],
-                                   atol=1e-2 * np.abs(jac).max())
+        np.testing.assert_allclose(
+            jac[~between, column], fd[~between], atol=1e-7 * np.abs(jac).max()
+        )
+        np.testing.assert_allclose(jac[between, column], fd[between], atol=1e-2 * np.abs(jac).max())
 
 
 @pytest.mark.parametrize("name", ["two_link", "ur5"])
@@ -162,7 +166,13 @@ def test_paper_update_lowers_j_and_keeps_the_ends() -> None:
     robot = load("two_link")
     seen: list[nearopt.Iteration] = []
     result = nearopt.plan(
-        robot, THETA_0, THETA_E, PAPER_COST, method="paper", grid=100, max_iterations=3,
+        robot,
+        THETA_0,
+        THETA_E,
+        PAPER_COST,
+        method="paper",
+        grid=100,
+        max_iterations=3,
         callback=seen.append,
     )
     assert len(result.history) == 4 and seen == list(result.history)  # the line first
@@ -180,8 +190,15 @@ def test_plan_on_urdf_arms(name: str) -> None:
     """A short plan on each arm: better than the straight line, verified, within every limit."""
     robot = load(name)
     q0, qe = end_points(robot, seed=9)
-    result = nearopt.plan(robot, q0, qe, PAPER_COST, grid=60,
-                          options=nearopt.SCPOptions(control_points=6), max_iterations=15)
+    result = nearopt.plan(
+        robot,
+        q0,
+        qe,
+        PAPER_COST,
+        grid=60,
+        options=nearopt.SCPOptions(control_points=6),
+        max_iterations=15,
+    )
     assert result.J < result.initial.J
     assert_independent_checks(robot, result.trajectory, PAPER_COST, result.J, q0, qe)
 

@@ -32,8 +32,9 @@ def test_random_plans_verify_or_raise_a_documented_error(robot: nearopt.Robot) -
             lim = robot.limits
             assert gravity > lim.effort_upper[j] or gravity < lim.effort_lower[j], str(exc)
             continue
-        report = nearopt.verify(result.trajectory, robot, rate=1000.0, q0=q0, qe=qe, cost=cost,
-                                J=result.J)
+        report = nearopt.verify(
+            result.trajectory, robot, rate=1000.0, q0=q0, qe=qe, cost=cost, J=result.J
+        )
         assert report.passed, f"seed {seed}: {report}"
         assert result.J <= result.initial.J
         planned += 1
@@ -45,8 +46,9 @@ def test_the_same_request_gives_the_same_motion(name: str) -> None:
     robot = load(name)
     rng = np.random.default_rng(7)
     q0, qe = random_configuration(robot, rng), random_configuration(robot, rng)
-    first, second = (nearopt.plan(robot, q0, qe, nearopt.TorqueCost(0.03), **BUDGET)
-                     for _ in range(2))
+    first, second = (
+        nearopt.plan(robot, q0, qe, nearopt.TorqueCost(0.03), **BUDGET) for _ in range(2)
+    )
     assert first.J == second.J
     assert [it.J for it in first.history] == [it.J for it in second.history]
     a, b = first.trajectory.sample(1000.0), second.trajectory.sample(1000.0)

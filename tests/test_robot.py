@@ -123,8 +123,11 @@ def test_eq10_matches_inverse_dynamics(robot: nearopt.Robot, rng: np.random.Gene
 # ---------------------------------------------------------------- a second parser: yourdfpy
 def _yourdfpy(robot: nearopt.Robot) -> yourdfpy.URDF:
     return yourdfpy.URDF.load(
-        str(robot.urdf_path), build_scene_graph=True, load_meshes=False,
-        build_collision_scene_graph=False, load_collision_meshes=False,
+        str(robot.urdf_path),
+        build_scene_graph=True,
+        load_meshes=False,
+        build_collision_scene_graph=False,
+        load_collision_meshes=False,
     )
 
 

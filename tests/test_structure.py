@@ -140,7 +140,9 @@ def test_the_reader_sees_a_cycle_and_a_private_import(tmp_path: Path) -> None:
 
 if __name__ == "__main__":
     found = read_structure()
-    print(f"{len(found.modules)} modules, {sum(map(len, found.arrows.values()))} arrows, "
-          f"cycles: {found.cycles() or 'none'}, private imports: {found.private or 'none'}")
+    print(
+        f"{len(found.modules)} modules, {sum(map(len, found.arrows.values()))} arrows, "
+        f"cycles: {found.cycles() or 'none'}, private imports: {found.private or 'none'}"
+    )
     for module, function, length in sorted(found.long_functions, key=lambda x: -x[2]):
         print(f"  {module}.{function}: {length} lines")

@@ -35,15 +35,24 @@ def test_a_chained_trajectory_is_its_parts_one_after_another() -> None:
     assert chain.duration == pytest.approx(a.duration + b.duration, rel=1e-14)
     t = np.linspace(0.0, b.duration, 7)
     for order in (0, 1, 2):
-        np.testing.assert_allclose(chain(a.duration + t[1:], order), b.trajectory(t[1:], order),
-                                   rtol=1e-12, atol=1e-12)
-        np.testing.assert_allclose(chain(t[:-1] * a.duration / b.duration, order),
-                                   a.trajectory(t[:-1] * a.duration / b.duration, order),
-                                   rtol=1e-12, atol=1e-12)
+        np.testing.assert_allclose(
+            chain(a.duration + t[1:], order), b.trajectory(t[1:], order), rtol=1e-12, atol=1e-12
+        )
+        np.testing.assert_allclose(
+            chain(t[:-1] * a.duration / b.duration, order),
+            a.trajectory(t[:-1] * a.duration / b.duration, order),
+            rtol=1e-12,
+            atol=1e-12,
+        )
     np.testing.assert_allclose(chain.part_at([0.0, a.duration, chain.duration]), [0, 1, 1])
     assert chain.integrate(lambda q, qd, u: np.ones(len(q))) == pytest.approx(chain.duration)
-    report = nearopt.verify(chain, robot, q0=[0.7, -1.5], qe=[0.3, 0.2],
-                            waypoints=[Waypoint(a.duration, [-1.5, 0.0], stop=True)])
+    report = nearopt.verify(
+        chain,
+        robot,
+        q0=[0.7, -1.5],
+        qe=[0.3, 0.2],
+        waypoints=[Waypoint(a.duration, [-1.5, 0.0], stop=True)],
+    )
     assert report.passed, str(report)
     with pytest.raises(nearopt.ConfigurationError, match="starts where the previous one ends"):
         ChainedTrajectory([b.trajectory, a.trajectory])
@@ -55,9 +64,12 @@ def test_a_task_stops_where_it_says_and_passes_where_it_says() -> None:
     robot = load("ur5")
     cost = nearopt.TorqueCost(0.001)
     result = nearopt.plan_task(
-        robot, UR5_START,
+        robot,
+        UR5_START,
         [Target(UR5_PASS, stop=False, name="pass"), Target(UR5_STOP, name="stop"), UR5_GOAL],
-        cost, grid=100, max_iterations=8,
+        cost,
+        grid=100,
+        max_iterations=8,
     )
     assert [t.name for t in result.targets] == ["pass", "stop", "target 3"]
     assert len(result.segments) == 2 and len(result.segments[0].via) == 1
@@ -71,8 +83,7 @@ def test_a_task_stops_where_it_says_and_passes_where_it_says() -> None:
     assert result.J == pytest.approx(sum(s.J for s in result.segments), rel=1e-14)
     assert result.J == pytest.approx(result.trajectory.integrate(cost), rel=1e-6)
     assert_independent_checks(robot, result.trajectory, cost, result.J, UR5_START, UR5_GOAL)
-    report = nearopt.verify(result.trajectory, robot, waypoints=result.waypoints,
-                            simulate=False)
+    report = nearopt.verify(result.trajectory, robot, waypoints=result.waypoints, simulate=False)
     assert {"via-point positions", "rest at stops"} <= {c.name for c in report.checks}
     assert report.passed, str(report)
     # a stop is planned like a goal: the second segment alone costs what the task's does
@@ -83,8 +94,12 @@ def test_a_task_stops_where_it_says_and_passes_where_it_says() -> None:
 def test_the_verifier_sees_a_missed_target_and_a_moving_stop() -> None:
     robot = load("two_link")
     a = nearopt.plan(robot, [0.7, -1.5], [-1.5, 0.0], max_iterations=0)
-    late = nearopt.verify(a.trajectory, robot, simulate=False,
-                          waypoints=[Waypoint(0.5 * a.duration, [-1.5, 0.0], stop=True)])
+    late = nearopt.verify(
+        a.trajectory,
+        robot,
+        simulate=False,
+        waypoints=[Waypoint(0.5 * a.duration, [-1.5, 0.0], stop=True)],
+    )
     assert {c.name for c in late.failures()} == {"via-point positions", "rest at stops"}
 
 
@@ -93,7 +108,7 @@ def test_a_task_file_is_read_and_bad_ones_name_the_target_and_field(tmp_path: Pa
     good.write_text(
         'start = [0, -45, 0, -135, 0, 90, 45]\nunits = "deg"\nframe = "panda_hand"\n'
         '[[target]]\nname = "above"\npose = [0.5, 0.1, 0.4]\nstop = false\n'
-        '[[target]]\nq = [10, -30, 0, -120, 0, 90, 45]\n'
+        "[[target]]\nq = [10, -30, 0, -120, 0, 90, 45]\n"
     )
     task = Task.from_file(good)
     np.testing.assert_allclose(task.start, np.deg2rad([0, -45, 0, -135, 0, 90, 45]))
@@ -102,7 +117,7 @@ def test_a_task_file_is_read_and_bad_ones_name_the_target_and_field(tmp_path: Pa
     np.testing.assert_allclose(second.goal, np.deg2rad([10, -30, 0, -120, 0, 90, 45]))
     assert second.stop and second.name == "target 2"
     cases = {
-        'speed = 1\n[[target]]\nq = [0]\n': ("speed", None),
+        "speed = 1\n[[target]]\nq = [0]\n": ("speed", None),
         '[[target]]\nname = "a"\nq = [0]\npose = [1, 2, 3]\n': ("q", "a"),
         '[[target]]\nname = "a"\n': ("q", "a"),
         '[[target]]\nname = "b"\nq = [0]\nstop = "no"\n': ("stop", "b"),
@@ -111,7 +126,7 @@ def test_a_task_file_is_read_and_bad_ones_name_the_target_and_field(tmp_path: Pa
         '[[target]]\nname = "e"\nq = [0]\nframe = "tool"\n': ("frame", "e"),
         '[[target]]\nname = "f"\nq = [0]\ncolour = 1\n': ("colour", "f"),
         'units = "grad"\n[[target]]\nq = [0]\n': ("units", None),
-        'start = 3\n[[target]]\nq = [0]\n': ("start", None),
+        "start = 3\n[[target]]\nq = [0]\n": ("start", None),
         'frame = "x"\n': ("target", None),
     }
     for text, (field, target) in cases.items():
@@ -131,8 +146,13 @@ def test_a_task_file_is_read_and_bad_ones_name_the_target_and_field(tmp_path: Pa
 
 def test_bad_targets_are_configuration_errors() -> None:
     robot = load("ur5")
-    for targets in ([], UR5_GOAL.tolist(), "goal", [Target(UR5_GOAL, stop="yes")],
-                    [Target(UR5_GOAL, name="")]):
+    for targets in (
+        [],
+        UR5_GOAL.tolist(),
+        "goal",
+        [Target(UR5_GOAL, stop="yes")],
+        [Target(UR5_GOAL, name="")],
+    ):
         with pytest.raises(nearopt.ConfigurationError):
             nearopt.plan_task(robot, UR5_START, targets)
     with pytest.raises(TaskError, match=r"target 'target 2': q must have 6 values"):
@@ -143,14 +163,32 @@ def test_the_cli_plans_a_task_file_and_marks_the_segments(tmp_path: Path) -> Non
     task = tmp_path / "task.toml"
     rows = "\n".join(
         f'[[target]]\nname = "{name}"\nq = {q.tolist()}\nstop = {str(stop).lower()}\n'
-        for name, q, stop in (("pass", UR5_PASS, False), ("stop", UR5_STOP, True),
-                              ("end", UR5_GOAL, True))
+        for name, q, stop in (
+            ("pass", UR5_PASS, False),
+            ("stop", UR5_STOP, True),
+            ("end", UR5_GOAL, True),
+        )
     )
     task.write_text(f"start = {UR5_START.tolist()}\n{rows}")
     out, table = tmp_path / "task.json", tmp_path / "task.csv"
-    run = run_cli("plan", "--robot", "ur5", "--task", str(task),
-                  "--beta", "0.001", "--max-iterations", "3", "--grid", "100", "--quiet",
-                  "--json", str(out), "--csv", str(table))
+    run = run_cli(
+        "plan",
+        "--robot",
+        "ur5",
+        "--task",
+        str(task),
+        "--beta",
+        "0.001",
+        "--max-iterations",
+        "3",
+        "--grid",
+        "100",
+        "--quiet",
+        "--json",
+        str(out),
+        "--csv",
+        str(table),
+    )
     assert run.returncode == 0, run.stderr
     assert "2 segments" in run.stdout and "segment 2 (to end)" in run.stdout
     doc = json.loads(out.read_text())
@@ -168,14 +206,14 @@ def test_the_cli_plans_a_task_file_and_marks_the_segments(tmp_path: Path) -> Non
     k = int(np.argmin(np.abs(t - first["t_end"])))  # the sample nearest the stop: nearly still
     qd = np.array([[float(samples[k][f"qd_{j}"]) for j in load("ur5").joint_names]])
     assert np.abs(qd).max() < 0.05
-    for args, message in ((["--qe", *map(str, UR5_GOAL)], "once"),
-                          (["--via", *map(str, UR5_PASS)], "--via applies")):
-        run = run_cli("plan", "--robot", "ur5", "--task", str(task),
-                      *args)
+    for args, message in (
+        (["--qe", *map(str, UR5_GOAL)], "once"),
+        (["--via", *map(str, UR5_PASS)], "--via applies"),
+    ):
+        run = run_cli("plan", "--robot", "ur5", "--task", str(task), *args)
         assert run.returncode == 2 and message in run.stderr and "Traceback" not in run.stderr
     task.write_text(rows)  # no start in the file, none on the command line
-    run = run_cli("plan", "--robot", "ur5",
-                  "--task", str(task))
+    run = run_cli("plan", "--robot", "ur5", "--task", str(task))
     assert run.returncode == 2 and "start configuration" in run.stderr
 
 
@@ -183,14 +221,23 @@ def test_the_pick_and_place_example_runs_and_its_files_hold_the_task(tmp_path: P
     """scripts/02_pick_and_place.py (as CI runs it): the JSON's samples reach every pose
     (independent forward kinematics), at rest where the task stops, moving where it passes."""
     run = subprocess.run(
-        [sys.executable, str(ROOT / "scripts" / "02_pick_and_place.py"), "--out",
-         str(tmp_path)], capture_output=True, text=True, timeout=600,
+        [sys.executable, str(ROOT / "scripts" / "02_pick_and_place.py"), "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=600,
     )
     assert run.returncode == 0, run.stderr + run.stdout
     assert "verification" in run.stdout and "FAIL" not in run.stdout
     names = {p.name for p in tmp_path.iterdir()}
-    assert {"pick_and_place.html", "pick_and_place.json", "pick_and_place.csv",
-            "workspace.png", "torques.png", "speeds.png", "history.png"} <= names
+    assert {
+        "pick_and_place.html",
+        "pick_and_place.json",
+        "pick_and_place.csv",
+        "workspace.png",
+        "torques.png",
+        "speeds.png",
+        "history.png",
+    } <= names
     doc = json.loads((tmp_path / "pick_and_place.json").read_text())
     robot = load("panda")
     data = robot.model.createData()
@@ -201,19 +248,28 @@ def test_the_pick_and_place_example_runs_and_its_files_hold_the_task(tmp_path: P
         np.testing.assert_allclose(data.oMf[frame].translation, [x, y, z], atol=1e-6)
         wanted = pin.Quaternion(qw, qx, qy, qz).toRotationMatrix()
         np.testing.assert_allclose(data.oMf[frame].rotation, wanted, atol=1e-6)
-        assert max(pose_error(robot, np.array(target["q"]),
-                              ToolPose((x, y, z), (qx, qy, qz, qw), "panda_hand_tcp"))) < 1e-6
+        assert (
+            max(
+                pose_error(
+                    robot,
+                    np.array(target["q"]),
+                    ToolPose((x, y, z), (qx, qy, qz, qw), "panda_hand_tcp"),
+                )
+            )
+            < 1e-6
+        )
     t, q = np.array(doc["t"]), np.array(doc["q"])
     pin.framesForwardKinematics(robot.model, data, q[-1])
-    np.testing.assert_allclose(data.oMf[frame].translation, doc["targets"][-1]["pose"][:3],
-                               atol=1e-6)
+    np.testing.assert_allclose(
+        data.oMf[frame].translation, doc["targets"][-1]["pose"][:3], atol=1e-6
+    )
     assert [x["stop"] for x in doc["targets"]] == [False, True, False, True]
     assert len(doc["segments"]) == 2
     qd, qdd = np.abs(np.array(doc["qd"])), np.abs(np.array(doc["qdd"]))
     for target in doc["targets"][:3]:  # the sample beside each target: moving unless it stops
         k = int(np.argmin(np.abs(t - target["t"])))
         if target["stop"]:  # at rest at t_stop: |θ̇(t_k)| ≤ max |θ̈| · |t_k − t_stop|
-            reach = qdd[max(k - 2, 0):k + 3].max(axis=0) * abs(t[k] - target["t"])
+            reach = qdd[max(k - 2, 0) : k + 3].max(axis=0) * abs(t[k] - target["t"])
             assert np.all(qd[k] <= reach * 1.01 + 1e-9), target["name"]
         else:
             assert qd[k].max() > 0.5, target["name"]
@@ -234,8 +290,9 @@ def test_a_first_path_through_a_via_point_at_a_limit_stays_within_the_limits() -
         q = result.path(s * result.path.s_end, 0)
         assert np.all(q <= upper + 1e-9) and np.all(q >= robot.limits.position_lower - 1e-9)
         np.testing.assert_allclose(result.trajectory(result.via_times, 0)[0], via, atol=1e-10)
-        report = nearopt.verify(result.trajectory, robot, q0=q0, qe=qe,
-                                waypoints=result.waypoints, simulate=False)
+        report = nearopt.verify(
+            result.trajectory, robot, q0=q0, qe=qe, waypoints=result.waypoints, simulate=False
+        )
         assert report.passed, str(report)
 
 
@@ -248,10 +305,14 @@ def test_every_target_is_checked_before_any_planning(tmp_path: Path) -> None:
     cases = {
         pick + '[[target]]\nname = "short"\nq = [0, 0, 0, 0, 0, 0]\n': ("short", "q"),
         pick + '[[target]]\nname = "far"\nq = [0, 0, 0, 0.5, 0, 1, 0]\n': ("far", "q"),
-        pick + '[[target]]\nname = "again"\npose = [0.5, -0.3, 0.12, 1.0, 0.0, 0.0, 0.0]\n':
-            ("again", "pose"),
-        '[[target]]\nname = "home"\nq = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]\n':
-            ("home", "q"),
+        pick + '[[target]]\nname = "again"\npose = [0.5, -0.3, 0.12, 1.0, 0.0, 0.0, 0.0]\n': (
+            "again",
+            "pose",
+        ),
+        '[[target]]\nname = "home"\nq = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]\n': (
+            "home",
+            "q",
+        ),
         '[[target]]\nname = "tool"\nframe = "gripper"\npose = [0.5, 0, 0.3]\n': ("tool", "frame"),
     }
     for text, (target, field) in cases.items():

@@ -276,11 +276,15 @@ def test_one_solve_holds_the_limits_between_samples(name: str, monkeypatch) -> N
         solves.append(len(calls))
         problem = result.problem
         disc = Discretisation(problem)
-        held = sum(block.stop - block.start for block in (
-            disc.blocks.torque_between, disc.blocks.acceleration_between,
-            disc.blocks.speed_between))
-        limited = np.isfinite(arm.limits.effort_upper).sum() + np.isfinite(
-            problem.velocity).sum()
+        held = sum(
+            block.stop - block.start
+            for block in (
+                disc.blocks.torque_between,
+                disc.blocks.acceleration_between,
+                disc.blocks.speed_between,
+            )
+        )
+        limited = np.isfinite(arm.limits.effort_upper).sum() + np.isfinite(problem.velocity).sum()
         assert 0 < held < 0.5 * 16 * problem.interior.points * problem.segments * limited
         if len(calls) > 1:
             continue
@@ -316,8 +320,15 @@ def test_limits_hold_between_samples_on_random_paths(name: str) -> None:
             continue
         timed += 1
         # (a given path may leave the position limits: stage 1 times it as it is)
-        report = nearopt.verify(result.trajectory, arm, rate=20000.0, cost=cost, J=result.J,
-                                position_limits=False, simulate=False)
+        report = nearopt.verify(
+            result.trajectory,
+            arm,
+            rate=20000.0,
+            cost=cost,
+            J=result.J,
+            position_limits=False,
+            simulate=False,
+        )
         assert report.passed, f"path {k} ({kind}): {report}"
     assert timed >= 24, timed
 
@@ -329,8 +340,9 @@ def test_the_reported_excesses_are_gone() -> None:
     double_pendulum = nearopt.Robot.from_urdf(
         erd_urdf("double_pendulum_description/urdf/double_pendulum.urdf"), effort_limit=2.0
     )
-    tiago = nearopt.Robot.from_urdf(erd_urdf("tiago_description/robots/tiago.urdf"),
-                                    tip="arm_7_link")
+    tiago = nearopt.Robot.from_urdf(
+        erd_urdf("tiago_description/robots/tiago.urdf"), tip="arm_7_link"
+    )
     cases = [
         (two_link, [2 * np.pi, 0.0], [0.0, 1.0], TimeCost()),
         (double_pendulum, [0.3, -0.4], [2.0, 1.0], TimeCost()),
@@ -338,8 +350,9 @@ def test_the_reported_excesses_are_gone() -> None:
     ]
     for robot, q0, qe, cost in cases:
         result = nearopt.plan(robot, q0, qe, cost, grid=100, max_iterations=5)
-        report = nearopt.verify(result.trajectory, robot, rate=20000.0, q0=q0, qe=qe, cost=cost,
-                                J=result.J)
+        report = nearopt.verify(
+            result.trajectory, robot, rate=20000.0, q0=q0, qe=qe, cost=cost, J=result.J
+        )
         assert report.passed, f"{robot.name}: {report}"
 
 
@@ -391,14 +404,16 @@ def test_samples_too_coarse_for_a_phase_are_flagged() -> None:
     assert fast.trajectory.faithful_rate() > 1000.0
     with pytest.warns(nearopt.SamplingWarning, match="shorter than one sample period"):
         json_text(fast, 1000.0)
-    limited = nearopt.plan(robot.with_limits(acceleration=20.0), q0, qe, TimeCost(),
-                           max_iterations=0)
+    limited = nearopt.plan(
+        robot.with_limits(acceleration=20.0), q0, qe, TimeCost(), max_iterations=0
+    )
     assert limited.trajectory.faithful_rate() < 1000.0
     assert check_sampling(limited, 1000.0) is None
 
 
 @pytest.mark.parametrize(
-    "cost", [TimeCost(), CallableCost(lambda q, qd, u: 1.0 + 0.01 * np.sum(u**2, axis=1))],
+    "cost",
+    [TimeCost(), CallableCost(lambda q, qd, u: 1.0 + 0.01 * np.sum(u**2, axis=1))],
     ids=["kernel", "NLP"],
 )
 def test_the_time_limit_stops_stage_1_at_its_first_unfinished_solve(
@@ -425,8 +440,11 @@ def test_the_time_limit_stops_stage_1_at_its_first_unfinished_solve(
         start = time.perf_counter()
         optimal_timing(panda, random_line(panda, 3), TimeCost(), grid=grid)
         budget = 2.0 * (time.perf_counter() - start)
-    with pytest.raises(nearopt.SolverError, match=rf"time limit \({budget:.3g} s\) on a grid of "
-                       rf"{grid} segments") as info:
+    with pytest.raises(
+        nearopt.SolverError,
+        match=rf"time limit \({budget:.3g} s\) on a grid of "
+        rf"{grid} segments",
+    ) as info:
         optimal_timing(panda, random_line(panda, 3), cost, grid=grid, time_limit=budget)
     assert info.value.status == "MaxTime"
     assert calls == []  # Clarabel was never asked
@@ -508,8 +526,7 @@ def test_limits_that_never_bind_change_nothing(name: str) -> None:
     path = random_line(robot, 4) if name != "two_link" else StraightPath(THETA_0, THETA_E)
     base = optimal_timing(robot, path, PAPER_COST, grid=100)
     for limit in (1e6, 1e12, 1e100, 1e300):
-        limited = optimal_timing(robot.with_limits(acceleration=limit), path, PAPER_COST,
-                                 grid=100)
+        limited = optimal_timing(robot.with_limits(acceleration=limit), path, PAPER_COST, grid=100)
         np.testing.assert_allclose(limited.b, base.b, rtol=1e-9, atol=1e-12 * base.b.max())
         np.testing.assert_allclose(limited.J, base.J, rtol=1e-9)
 
@@ -543,8 +560,10 @@ def test_the_kernel_solves_every_seeded_problem(name: str) -> None:
     for k in range(48):
         scale = (1e-3, 1.0, 1e6)[k % 3]
         lim = robot.limits
-        arm = robot.with_limits(velocity=scale * np.asarray(lim.velocity),
-                                acceleration=scale**2 * 20.0 if k % 2 else np.inf)
+        arm = robot.with_limits(
+            velocity=scale * np.asarray(lim.velocity),
+            acceleration=scale**2 * 20.0 if k % 2 else np.inf,
+        )
         path = random_path(robot, rng, ("straight", "spline", "bspline")[(k // 3) % 3])
         cost = (TimeCost(), TorqueCost(1e-3))[(k // 2) % 2]
         try:
@@ -582,8 +601,15 @@ def test_heavy_damping_is_timed_in_one_solve() -> None:
         arm = robot.with_limits(damping=damping)
         result = optimal_timing(arm, path, PAPER_COST, grid=100)
         assert result.solver == TimingMethod.INTERIOR, result.message
-        report = nearopt.verify(result.trajectory, arm, rate=20000.0, cost=PAPER_COST,
-                                J=result.J, position_limits=False, simulate=False)
+        report = nearopt.verify(
+            result.trajectory,
+            arm,
+            rate=20000.0,
+            cost=PAPER_COST,
+            J=result.J,
+            position_limits=False,
+            simulate=False,
+        )
         assert report.passed, f"D = {damping}: {report}"
         problem = build_timing_problem(arm, path, grid=100)
         ours = solve_timing(problem, PAPER_COST)

@@ -17,13 +17,21 @@ def plan() -> nearopt.PlanResult:
 
 
 def test_a_plan_passes_every_check(plan: nearopt.PlanResult) -> None:
-    report = verify(plan.trajectory, plan.robot, rate=500.0, q0=THETA_0, qe=THETA_E, cost=COST,
-                    J=plan.J)
+    report = verify(
+        plan.trajectory, plan.robot, rate=500.0, q0=THETA_0, qe=THETA_E, cost=COST, J=plan.J
+    )
     assert report.passed, str(report)
     assert [c.name for c in report.checks] == [
-        "torque limits (RNEA)", "joint speed limits", "joint position limits", "end positions",
-        "rest at both ends", "J recomputed", "simulated end position", "simulated end speed",
-        "simulation window defect"]
+        "torque limits (RNEA)",
+        "joint speed limits",
+        "joint position limits",
+        "end positions",
+        "rest at both ends",
+        "J recomputed",
+        "simulated end position",
+        "simulated end speed",
+        "simulation window defect",
+    ]
     assert report.samples == int(np.floor(plan.duration * 500)) + 1 + 1  # 0 … te inclusive
     assert report["torque limits (RNEA)"].worst < 0  # strictly inside somewhere short of limits
     report.raise_if_failed()
@@ -66,7 +74,8 @@ def test_rate_must_be_positive(plan: nearopt.PlanResult) -> None:
 def test_joints_without_a_speed_or_position_limit_are_not_failures(
     plan: nearopt.PlanResult,
 ) -> None:
-    free = plan.robot.with_limits(velocity=[np.inf, 100.0],
-                                  position=([-np.inf, -7.0], [np.inf, 7.0]))
+    free = plan.robot.with_limits(
+        velocity=[np.inf, 100.0], position=([-np.inf, -7.0], [np.inf, 7.0])
+    )
     report = verify(plan.trajectory, free)
     assert report.passed, str(report)

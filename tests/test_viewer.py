@@ -17,8 +17,13 @@ from nearopt.paper_example import COST, THETA_0, THETA_E
 from nearopt.viz.viewer import export_html, mesh_parts, show
 
 CHROMIUM = Path("/usr/bin/chromium")
-ARGS = ["--headless", "--no-sandbox", "--disable-gpu", "--disable-background-networking",
-        "--disable-component-update"]
+ARGS = [
+    "--headless",
+    "--no-sandbox",
+    "--disable-gpu",
+    "--disable-background-networking",
+    "--disable-component-update",
+]
 COUNT_MESHES = "() => { let c = 0; viewer.scene.traverse(o => { if (o.isMesh) c++; }); return c; }"
 
 
@@ -27,11 +32,20 @@ def plans() -> dict[str, nearopt.PlanResult]:
     """Short plans: the paper's example and a panda motion (a few iterations suffice here)."""
     return {
         "two_link": nearopt.plan(
-            load("two_link"), THETA_0, THETA_E, COST, grid=60, max_iterations=20,
+            load("two_link"),
+            THETA_0,
+            THETA_E,
+            COST,
+            grid=60,
+            max_iterations=20,
         ),
         "panda": nearopt.plan(
-            load("panda"), [0, -0.5, 0, -2, 0, 1.5, 0.8], [1, 0, 0.5, -1.5, 0, 2, 0],
-            nearopt.TimeCost(), grid=60, max_iterations=3,
+            load("panda"),
+            [0, -0.5, 0, -2, 0, 1.5, 0.8],
+            [1, 0, 0.5, -1.5, 0, 2, 0],
+            nearopt.TimeCost(),
+            grid=60,
+            max_iterations=3,
         ),
     }
 
@@ -61,8 +75,10 @@ BASE_PIXEL = f"""() => {{
 
 
 def _visible(page: object, node: list[str], visible: bool) -> None:
-    page.evaluate(f"viewer.scene_tree.find({node!r}).object.visible = {str(visible).lower()};"
-                  "viewer.set_dirty();")
+    page.evaluate(
+        f"viewer.scene_tree.find({node!r}).object.visible = {str(visible).lower()};"
+        "viewer.set_dirty();"
+    )
 
 
 def _open(page: object, url: str, geometries: int) -> None:
@@ -120,8 +136,9 @@ def test_exported_page_frames_the_motion_on_the_floor_offline(
         pin.updateGeometryPlacements(robot.model, data, visual, gdata)
         for g, placement in zip(visual.geometryObjects, gdata.oMg, strict=True):
             shown = page.evaluate(PLACEMENT, ["meshcat", robot.name, "visuals", g.name])
-            np.testing.assert_allclose(np.reshape(shown, (4, 4)), placement.homogeneous,
-                                       atol=1e-6, err_msg=g.name)
+            np.testing.assert_allclose(
+                np.reshape(shown, (4, 4)), placement.homogeneous, atol=1e-6, err_msg=g.name
+            )
         base = page.evaluate(BASE_PIXEL)
 
         def screenshot(label: str) -> np.ndarray:
@@ -273,16 +290,24 @@ def test_the_exported_page_draws_the_obstacles_in_place(tmp_path: Path) -> None:
     playwright = pytest.importorskip("playwright.sync_api")
     from nearopt.collision import Box, Capsule, Cylinder, HalfSpace, Obstacle, Scene, Sphere
 
-    cell = Scene((
-        Obstacle("table", Box((1.2, 1.2, 0.04)), (0.3, 0.0, -0.03)),
-        Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5), (0.0, 0.1, 0.0)),
-        Obstacle("ball", Sphere(0.08), (-0.4, 0.3, 0.5)),
-        Obstacle("bar", Capsule(0.03, 0.4), (-0.4, -0.4, 0.4), (0.3, 0.0, 0.0)),
-        Obstacle("floor", HalfSpace((0.0, 0.0, 1.0), -0.2)),
-    ))
-    result = nearopt.plan(load("ur5"), [-0.8, -1.2, 1.2, -1.5, -1.57, 0.0],
-                          [0.8, -1.2, 1.2, -1.5, -1.57, 0.0], nearopt.TimeCost(), grid=60,
-                          max_iterations=2, scene=cell)
+    cell = Scene(
+        (
+            Obstacle("table", Box((1.2, 1.2, 0.04)), (0.3, 0.0, -0.03)),
+            Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5), (0.0, 0.1, 0.0)),
+            Obstacle("ball", Sphere(0.08), (-0.4, 0.3, 0.5)),
+            Obstacle("bar", Capsule(0.03, 0.4), (-0.4, -0.4, 0.4), (0.3, 0.0, 0.0)),
+            Obstacle("floor", HalfSpace((0.0, 0.0, 1.0), -0.2)),
+        )
+    )
+    result = nearopt.plan(
+        load("ur5"),
+        [-0.8, -1.2, 1.2, -1.5, -1.57, 0.0],
+        [0.8, -1.2, 1.2, -1.5, -1.57, 0.0],
+        nearopt.TimeCost(),
+        grid=60,
+        max_iterations=2,
+        scene=cell,
+    )
     html = export_html(result, tmp_path / "cell.html")
     visual = result.robot.visual_model()
     with playwright.sync_playwright() as p:
@@ -290,14 +315,13 @@ def test_the_exported_page_draws_the_obstacles_in_place(tmp_path: Path) -> None:
         page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
         _open(page, html.resolve().as_uri(), len(visual.geometryObjects) + 7)
         for ob in cell.obstacles[:4]:
-            shown = np.reshape(page.evaluate(PLACEMENT, ["meshcat", "obstacles", ob.name]),
-                               (4, 4))
+            shown = np.reshape(page.evaluate(PLACEMENT, ["meshcat", "obstacles", ob.name]), (4, 4))
             np.testing.assert_allclose(shown[:3, 3], ob.position, atol=1e-9, err_msg=ob.name)
-            np.testing.assert_allclose(shown[:3, :3], ob.rotation(), atol=1e-9,
-                                       err_msg=ob.name)
+            np.testing.assert_allclose(shown[:3, :3], ob.rotation(), atol=1e-9, err_msg=ob.name)
         # the floor's slab: its top face on z = −0.2
-        slab = np.reshape(page.evaluate(PLACEMENT, ["meshcat", "obstacles", "floor", "slab"]),
-                          (4, 4))
+        slab = np.reshape(
+            page.evaluate(PLACEMENT, ["meshcat", "obstacles", "floor", "slab"]), (4, 4)
+        )
         assert slab[2, 3] + 0.005 == pytest.approx(-0.2, abs=1e-9)
         page.wait_for_timeout(300)
         page.screenshot(path=tmp_path / "with.png")
@@ -305,16 +329,18 @@ def test_the_exported_page_draws_the_obstacles_in_place(tmp_path: Path) -> None:
         page.wait_for_timeout(300)
         page.screenshot(path=tmp_path / "without.png")
         browser.close()
-    changed = np.any(np.abs(_pixels(tmp_path / "with.png") - _pixels(tmp_path / "without.png"))
-                     > 25, axis=2)
+    changed = np.any(
+        np.abs(_pixels(tmp_path / "with.png") - _pixels(tmp_path / "without.png")) > 25, axis=2
+    )
     assert changed.mean() > 0.05  # the obstacles cover a good part of the view
 
 
 def test_the_exported_page_marks_a_goal_pose_with_a_triad(tmp_path: Path) -> None:
     playwright = pytest.importorskip("playwright.sync_api")
     goal = nearopt.ToolPose((0.5, 0.2, 0.3), (1.0, 0.0, 0.0, 0.0))
-    result = nearopt.plan(load("panda"), [0, -0.5, 0, -2, 0, 1.5, 0.8], goal, grid=60,
-                          max_iterations=2)
+    result = nearopt.plan(
+        load("panda"), [0, -0.5, 0, -2, 0, 1.5, 0.8], goal, grid=60, max_iterations=2
+    )
     html = export_html(result, tmp_path / "goal.html")
     with playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
@@ -332,18 +358,25 @@ def test_the_page_of_a_task_marks_every_target(tmp_path: Path) -> None:
     robot = load("panda")
     stop = np.array([0.4, -0.3, 0.2, -2.2, 0.1, 1.9, 0.6])
     goal = nearopt.ToolPose((0.5, 0.2, 0.3), (1.0, 0.0, 0.0, 0.0))
-    result = nearopt.plan_task(robot, [0, -0.5, 0, -2, 0, 1.5, 0.8],
-                               [nearopt.Target(stop, name="stop"), goal], grid=60,
-                               max_iterations=1)
+    result = nearopt.plan_task(
+        robot,
+        [0, -0.5, 0, -2, 0, 1.5, 0.8],
+        [nearopt.Target(stop, name="stop"), goal],
+        grid=60,
+        max_iterations=1,
+    )
     html = export_html(result, tmp_path / "task.html")
     with playwright.sync_playwright() as p:
         browser = p.chromium.launch(executable_path=str(CHROMIUM), args=ARGS)
         page = browser.new_page(viewport={"width": WIDTH, "height": HEIGHT})
         _open(page, html.resolve().as_uri(), len(robot.visual_model().geometryObjects))
-        shown = [np.reshape(page.evaluate(PLACEMENT, ["meshcat", "targets", f"target{k}"]),
-                            (4, 4)) for k in range(2)]
+        shown = [
+            np.reshape(page.evaluate(PLACEMENT, ["meshcat", "targets", f"target{k}"]), (4, 4))
+            for k in range(2)
+        ]
         names = page.evaluate(
-            "(path) => Object.keys(viewer.scene_tree.find(path).children)", ["meshcat", "targets"])
+            "(path) => Object.keys(viewer.scene_tree.find(path).children)", ["meshcat", "targets"]
+        )
         browser.close()
     np.testing.assert_allclose(shown[0], robot.frame_placement(stop).homogeneous, atol=1e-9)
     np.testing.assert_allclose(shown[1], goal.placement().homogeneous, atol=1e-9)

@@ -27,8 +27,12 @@ def write_urdf(
     for k, (parent, child) in enumerate((("base", "a"), ("a", "b"))):
         parts.append(
             JOINT.format(
-                name=f"j{k + 1}", type=types[k], parent=parent, child=child,
-                limit=limits[k], extra=extra[k],
+                name=f"j{k + 1}",
+                type=types[k],
+                parent=parent,
+                child=child,
+                limit=limits[k],
+                extra=extra[k],
             )
         )
     parts.append("</robot>")
@@ -42,4 +46,3 @@ def erd_urdf(relative: str) -> Path:
     from nearopt.catalog import package_dirs
 
     return package_dirs()[0] / "example-robot-data" / "robots" / relative
-

@@ -168,8 +168,9 @@ class CollisionModel:
         for ob in self.scene.obstacles:
             shape = _coal_shape(ob.shape, ob.name)
             placement = pin.SE3(ob.rotation(), np.asarray(ob.position, dtype=float))
-            geom.addGeometryObject(pin.GeometryObject(f"obstacle:{ob.name}", 0, 0, placement,
-                                                      shape))
+            geom.addGeometryObject(
+                pin.GeometryObject(f"obstacle:{ob.name}", 0, 0, placement, shape)
+            )
         self.geometry = geom
         self._names = [self._body(i) for i in range(geom.ngeoms)]
         self._joint = np.array([o.parentJoint for o in geom.geometryObjects], dtype=int)
@@ -196,8 +197,9 @@ class CollisionModel:
         self._gdata = pin.GeometryData(geom)
         self._configure()
         if self_collision and pairs:  # MoveIt's "default" rule (kinova's, z1's SRDFs lack it)
-            q = np.clip(np.zeros(model.nq), robot.limits.position_lower,
-                        robot.limits.position_upper)
+            q = np.clip(
+                np.zeros(model.nq), robot.limits.position_lower, robot.limits.position_upper
+            )
             d = self._all(q)
             keep = [k for k, (a, b) in enumerate(pairs) if b >= self._robot_geoms or d[k] > 0.0]
             if len(keep) < len(pairs):
@@ -215,8 +217,10 @@ class CollisionModel:
 
     # ------------------------------------------------------------------ queries
     def __repr__(self) -> str:
-        return (f"CollisionModel({self.robot.name!r}, {len(self.scene.obstacles)} obstacles, "
-                f"{len(self.pairs)} pairs, margin {self.margin:g} m)")
+        return (
+            f"CollisionModel({self.robot.name!r}, {len(self.scene.obstacles)} obstacles, "
+            f"{len(self.pairs)} pairs, margin {self.margin:g} m)"
+        )
 
     def distances(self, q: ArrayLike) -> NDArray[np.float64]:
         """Signed distance of every checked pair at θ [m], shape (len(pairs),)."""
@@ -229,18 +233,25 @@ class CollisionModel:
             return Contact(Pair("", ""), np.inf, np.full((2, 3), np.nan))
         k = int(np.argmin(d))
         r = self._gdata.distanceResults[k]
-        return Contact(self.pairs[k], float(d[k]),
-                       np.array([r.getNearestPoint1(), r.getNearestPoint2()]), k)
+        return Contact(
+            self.pairs[k], float(d[k]), np.array([r.getNearestPoint1(), r.getNearestPoint2()]), k
+        )
 
     def check_configuration(self, q: ArrayLike, what: str = "configuration") -> None:
         """Raise a :class:`CollisionError` if a checked pair at θ is closer than the margin."""
         c = self.closest(q)
         if c.distance < self.margin:
-            state = (f"penetrates by {-c.distance * 1e3:.1f} mm" if c.distance < 0 else
-                     f"is {c.distance * 1e3:.1f} mm apart, closer than the margin "
-                     f"{self.margin * 1e3:.1f} mm")
-            raise CollisionError(f"the {what} collides: {c.pair} {state}",
-                                 pair=(c.pair.first, c.pair.second), distance=c.distance)
+            state = (
+                f"penetrates by {-c.distance * 1e3:.1f} mm"
+                if c.distance < 0
+                else f"is {c.distance * 1e3:.1f} mm apart, closer than the margin "
+                f"{self.margin * 1e3:.1f} mm"
+            )
+            raise CollisionError(
+                f"the {what} collides: {c.pair} {state}",
+                pair=(c.pair.first, c.pair.second),
+                distance=c.distance,
+            )
 
     def distance_gradients(
         self, q: ArrayLike, pairs: ArrayLike | None = None
@@ -272,20 +283,26 @@ class CollisionModel:
         frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         for side, sign in ((0, -1.0), (1, 1.0)):
             joints = self._joint[self._pairs[index, side]]
-            points = np.array([r.getNearestPoint1() if side == 0 else r.getNearestPoint2()
-                               for r in results])
+            points = np.array(
+                [r.getNearestPoint1() if side == 0 else r.getNearestPoint2() for r in results]
+            )
             for j in np.unique(joints[joints != 0]):
                 rows = np.flatnonzero(joints == j)
                 jac = pin.getJointJacobian(model, data, int(j), frame)  # [v; ω] at o_j
                 arm = points[rows] - data.oMi[int(j)].translation
                 # nᵀ(v + ω × r) = nᵀv + (r × n)ᵀω
-                grads[rows] += sign * (normal[rows] @ jac[:3]
-                                       + np.cross(arm, normal[rows]) @ jac[3:])
+                grads[rows] += sign * (
+                    normal[rows] @ jac[:3] + np.cross(arm, normal[rows]) @ jac[3:]
+                )
         return d[index], grads
 
     # ------------------------------------------------------------------ paths
     def path_clearance(
-        self, path: JointPath, level: float | None = None, *, samples: int = 64,
+        self,
+        path: JointPath,
+        level: float | None = None,
+        *,
+        samples: int = 64,
         max_checks: int = 2_000_000,
     ) -> Clearance:
         """Check a whole path: is every pair at least ``level`` apart at every s?
@@ -315,13 +332,15 @@ class CollisionModel:
         def contact(k: int, d: float, at: NDArray[np.float64]) -> Contact:
             self._all(at)
             r = self._gdata.distanceResults[int(k)]
-            return Contact(self.pairs[k], d, np.array([r.getNearestPoint1(),
-                                                       r.getNearestPoint2()]), int(k))
+            return Contact(
+                self.pairs[k], d, np.array([r.getNearestPoint1(), r.getNearestPoint2()]), int(k)
+            )
 
         worst = (float(dist[k_min]), float(s[k_min[0]]), int(k_min[1]))
         if worst[0] < level:
-            return Clearance(False, level, contact(worst[2], worst[0], q[k_min[0]]), worst[1],
-                             checks)
+            return Clearance(
+                False, level, contact(worst[2], worst[0], q[k_min[0]]), worst[1], checks
+            )
         slope = _slope_bound(path)
         # intervals (a, b, d_a, d_b) per pair, vectorised over the first pass
         rate = self.motion_rates  # (P, n): R_j of each pair's moving bodies
@@ -333,8 +352,7 @@ class CollisionModel:
         while stack:
             a, b, da, db, k = stack.pop()
             if checks > max_checks or b - a < 1e-9 * s_end:
-                return Clearance(False, level, contact(k, min(da, db), path([a])[0]), a,
-                                 checks)
+                return Clearance(False, level, contact(k, min(da, db), path([a])[0]), a, checks)
             m = 0.5 * (a + b)
             qm = path([m])[0]
             pin.forwardKinematics(model, data, qm)
@@ -349,8 +367,9 @@ class CollisionModel:
                 v = slope(np.array([lo]), np.array([hi]))[0] @ rate[k] * (hi - lo)
                 if dl + dh - 2.0 * level < v:
                     stack.append((lo, hi, dl, dh, k))
-        return Clearance(True, level, contact(worst[2], worst[0], path([worst[1]])[0]),
-                         worst[1], checks)
+        return Clearance(
+            True, level, contact(worst[2], worst[0], path([worst[1]])[0]), worst[1], checks
+        )
 
     # ------------------------------------------------------------------ internals
     def __reduce__(self) -> tuple[object, ...]:
@@ -398,13 +417,22 @@ class CollisionModel:
             g.computeLocalAABB()
             centre = obj.placement.act(np.asarray(g.aabb_center))
             radius[i] = np.linalg.norm(centre) + g.aabb_radius
-        prismatic = np.array([model.joints[j].shortname().startswith("JointModelP")
-                              for j in range(1, model.njoints)])
-        travel = np.where(prismatic, np.maximum(np.abs(robot.limits.position_lower),
-                                                np.abs(robot.limits.position_upper)), 0.0)
+        prismatic = np.array(
+            [model.joints[j].shortname().startswith("JointModelP") for j in range(1, model.njoints)]
+        )
+        travel = np.where(
+            prismatic,
+            np.maximum(np.abs(robot.limits.position_lower), np.abs(robot.limits.position_upper)),
+            0.0,
+        )
         travel = np.where(np.isfinite(travel), travel, 10.0)
-        offsets = np.array([0.0] + [np.linalg.norm(model.jointPlacements[j].translation)
-                                    + travel[j - 1] for j in range(1, model.njoints)])
+        offsets = np.array(
+            [0.0]
+            + [
+                np.linalg.norm(model.jointPlacements[j].translation) + travel[j - 1]
+                for j in range(1, model.njoints)
+            ]
+        )
 
         def reach(j: int, body: int) -> float:
             """Bound on the distance of the body's points from joint j's axis [m]."""
@@ -491,13 +519,17 @@ def _coal_shape(shape: object, name: str) -> coal.CollisionGeometry:
         try:
             bvh = coal.MeshLoader().load(str(shape.path), np.full(3, shape.scale))
         except (RuntimeError, ValueError) as exc:
-            raise SceneError(f"obstacle {name!r}: cannot load the mesh {shape.path}: {exc}",
-                             obstacle=name, field="mesh") from None
+            raise SceneError(
+                f"obstacle {name!r}: cannot load the mesh {shape.path}: {exc}",
+                obstacle=name,
+                field="mesh",
+            ) from None
         try:
             return _convex(bvh, name)
         except URDFError as exc:
-            raise SceneError(f"obstacle {name!r}: {shape.path}: {exc}", obstacle=name,
-                             field="mesh") from None
+            raise SceneError(
+                f"obstacle {name!r}: {shape.path}: {exc}", obstacle=name, field="mesh"
+            ) from None
     raise SceneError(f"obstacle {name!r}: unknown shape {type(shape).__name__}", obstacle=name)
 
 
@@ -507,17 +539,25 @@ def _srdf_disabled(path: Path) -> set[frozenset[str]]:
         root = ET.parse(path).getroot()
     except (OSError, ET.ParseError) as exc:
         raise URDFError(f"cannot read the SRDF {path}: {exc}", path=str(path)) from None
-    return {frozenset((e.get("link1", ""), e.get("link2", "")))
-            for e in root.iter("disable_collisions")}
+    return {
+        frozenset((e.get("link1", ""), e.get("link2", ""))) for e in root.iter("disable_collisions")
+    }
 
 
-def _rebuild(robot: Robot, scene: Scene | None, srdf: str | Path | None, margin: float | None,
-             self_collision: bool) -> CollisionModel:
+def _rebuild(
+    robot: Robot,
+    scene: Scene | None,
+    srdf: str | Path | None,
+    margin: float | None,
+    self_collision: bool,
+) -> CollisionModel:
     return CollisionModel(robot, scene, srdf=srdf, margin=margin, self_collision=self_collision)
 
 
 def collisions_for(
-    robot: Robot, scene: Scene | CollisionModel | None, margin: float | None,
+    robot: Robot,
+    scene: Scene | CollisionModel | None,
+    margin: float | None,
     self_collision: bool | None,
 ) -> CollisionModel | None:
     """The collision model a plan keeps, or None when nothing is checked: ``scene`` itself if it

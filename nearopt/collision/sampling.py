@@ -55,8 +55,13 @@ def collision_free_path(
     process); where ``os.fork`` is missing it runs here (reproducible for the first request).
     Parameters and errors as :func:`search_paths`.
     """
-    arguments = dict(control_points=control_points, breaks=breaks, time_limit=time_limit,
-                     clearance=clearance, attempts=attempts)
+    arguments = dict(
+        control_points=control_points,
+        breaks=breaks,
+        time_limit=time_limit,
+        clearance=clearance,
+        attempts=attempts,
+    )
     if not hasattr(os, "fork") or _seeded:
         return search_paths(collisions, q0, qe, **arguments)  # type: ignore[arg-type]
     read, write = os.pipe()
@@ -92,8 +97,7 @@ def collision_free_path(
         raise CollisionError(str(value))
     if kind == "error":
         raise SolverError(f"the OMPL search failed: {value}")
-    return [BSplinePath(c, breaks if c.shape[0] == control_points + 2 else None)
-            for c in value]  # type: ignore[union-attr]
+    return [BSplinePath(c, breaks if c.shape[0] == control_points + 2 else None) for c in value]  # type: ignore[union-attr]
 
 
 SEARCH_CHECKS = 20_000  # validity and motion checks one OMPL search may take (about 1-2 s)
@@ -156,10 +160,12 @@ def search_paths(
     robot = collisions.robot
     n = robot.n
     lim = robot.limits
-    lower = np.where(np.isfinite(lim.position_lower), lim.position_lower,
-                     np.minimum(q0, qe) - np.pi)
-    upper = np.where(np.isfinite(lim.position_upper), lim.position_upper,
-                     np.maximum(q0, qe) + np.pi)
+    lower = np.where(
+        np.isfinite(lim.position_lower), lim.position_lower, np.minimum(q0, qe) - np.pi
+    )
+    upper = np.where(
+        np.isfinite(lim.position_upper), lim.position_upper, np.maximum(q0, qe) + np.pi
+    )
     for q, what in ((q0, "start"), (qe, "goal")):
         collisions.check_configuration(q, what)
     space = ob.RealVectorStateSpace(n)
@@ -214,9 +220,13 @@ def search_paths(
             break
         setup.clear()
         first = checks[0]
-        status = setup.solve(ob.PlannerTerminationCondition(
-            lambda first=first: checks[0] - first > SEARCH_CHECKS
-            or time.perf_counter() >= deadline))
+        status = setup.solve(
+            ob.PlannerTerminationCondition(
+                lambda first=first: (
+                    checks[0] - first > SEARCH_CHECKS or time.perf_counter() >= deadline
+                )
+            )
+        )
         if status.getStatus() != ob.PlannerStatus.EXACT_SOLUTION:
             continue
         path = setup.getSolutionPath()

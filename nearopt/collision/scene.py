@@ -138,28 +138,40 @@ class Obstacle:
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name:
-            raise SceneError(f"an obstacle's name is a non-empty string, got {self.name!r}",
-                             field="name")
+            raise SceneError(
+                f"an obstacle's name is a non-empty string, got {self.name!r}", field="name"
+            )
         try:
             _check_shape(self.name, self.shape)
         except (TypeError, ValueError) as exc:
             if isinstance(exc, SceneError):
                 raise
-            raise SceneError(f"obstacle {self.name!r}: a bad {type(self.shape).__name__}: "
-                             f"{exc}", obstacle=self.name, field="shape") from None
+            raise SceneError(
+                f"obstacle {self.name!r}: a bad {type(self.shape).__name__}: {exc}",
+                obstacle=self.name,
+                field="shape",
+            ) from None
         object.__setattr__(self, "position", _vector(self.name, "position", self.position, 3))
         object.__setattr__(self, "rpy", _vector(self.name, "rpy", self.rpy, 3))
 
     def rotation(self) -> NDArray[np.float64]:
         """The placement's rotation matrix R = Rz(yaw) Ry(pitch) Rx(roll), shape (3, 3)."""
         r, p, y = self.rpy
-        cr, sr, cp, sp_, cy, sy = (math.cos(r), math.sin(r), math.cos(p), math.sin(p),
-                                   math.cos(y), math.sin(y))
-        return np.array([
-            [cy * cp, cy * sp_ * sr - sy * cr, cy * sp_ * cr + sy * sr],
-            [sy * cp, sy * sp_ * sr + cy * cr, sy * sp_ * cr - cy * sr],
-            [-sp_, cp * sr, cp * cr],
-        ])
+        cr, sr, cp, sp_, cy, sy = (
+            math.cos(r),
+            math.sin(r),
+            math.cos(p),
+            math.sin(p),
+            math.cos(y),
+            math.sin(y),
+        )
+        return np.array(
+            [
+                [cy * cp, cy * sp_ * sr - sy * cr, cy * sp_ * cr + sy * sr],
+                [sy * cp, sy * sp_ * sr + cy * cr, sy * sp_ * cr - cy * sr],
+                [-sp_, cp * sr, cp * cr],
+            ]
+        )
 
 
 @dataclass(frozen=True)
@@ -181,21 +193,30 @@ class Scene:
 
     def __post_init__(self) -> None:
         if isinstance(self.obstacles, Obstacle) or not isinstance(self.obstacles, tuple | list):
-            raise SceneError(f"a scene's obstacles are a tuple of Obstacle records, got "
-                             f"{type(self.obstacles).__name__}")
+            raise SceneError(
+                f"a scene's obstacles are a tuple of Obstacle records, got "
+                f"{type(self.obstacles).__name__}"
+            )
         object.__setattr__(self, "obstacles", tuple(self.obstacles))
         seen: set[str] = set()
         for ob in self.obstacles:
             if not isinstance(ob, Obstacle):
                 raise SceneError(f"a scene holds Obstacle records, got {type(ob).__name__}")
             if ob.name in seen:
-                raise SceneError(f"two obstacles are named {ob.name!r}: names must be unique",
-                                 obstacle=ob.name, field="name")
+                raise SceneError(
+                    f"two obstacles are named {ob.name!r}: names must be unique",
+                    obstacle=ob.name,
+                    field="name",
+                )
             seen.add(ob.name)
-        if not (isinstance(self.margin, int | float) and math.isfinite(self.margin)
-                and self.margin >= 0.0):
-            raise SceneError(f"margin must be a distance ≥ 0 [m], got {self.margin!r}",
-                             field="margin")
+        if not (
+            isinstance(self.margin, int | float)
+            and math.isfinite(self.margin)
+            and self.margin >= 0.0
+        ):
+            raise SceneError(
+                f"margin must be a distance ≥ 0 [m], got {self.margin!r}", field="margin"
+            )
 
     def with_margin(self, margin: float) -> Scene:
         """This scene with another margin [m]."""
@@ -214,8 +235,11 @@ class Scene:
         path, data = read_toml(path, SceneError, "scene")
         unknown = sorted(set(data) - {"margin", "obstacle"})
         if unknown:
-            raise SceneError(f"{path}: unknown field {unknown[0]!r} (the fields are 'margin' and "
-                             "[[obstacle]] tables)", field=unknown[0])
+            raise SceneError(
+                f"{path}: unknown field {unknown[0]!r} (the fields are 'margin' and "
+                "[[obstacle]] tables)",
+                field=unknown[0],
+            )
         entries = data.get("obstacle", [])
         if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
             raise SceneError(f"{path}: obstacles are [[obstacle]] tables", field="obstacle")
@@ -224,12 +248,10 @@ class Scene:
             try:
                 obstacles.append(_obstacle(entry, number, path.parent))
             except SceneError as exc:
-                raise SceneError(f"{path}: {exc}", obstacle=exc.obstacle,
-                                 field=exc.field) from None
+                raise SceneError(f"{path}: {exc}", obstacle=exc.obstacle, field=exc.field) from None
         margin = data.get("margin", DEFAULT_MARGIN)
         if isinstance(margin, bool) or not isinstance(margin, int | float):
-            raise SceneError(f"{path}: margin must be a number [m], got {margin!r}",
-                             field="margin")
+            raise SceneError(f"{path}: margin must be a number [m], got {margin!r}", field="margin")
         try:
             return cls(tuple(obstacles), float(margin), path)
         except SceneError as exc:
@@ -242,22 +264,31 @@ _SHAPES = ("box", "sphere", "cylinder", "capsule", "halfspace", "mesh")
 def _obstacle(entry: dict[str, object], number: int, folder: Path) -> Obstacle:
     name = entry.get("name", f"obstacle {number}")
     if not isinstance(name, str) or not name:
-        raise SceneError(f"obstacle {number}: name must be a non-empty string, got {name!r}",
-                         field="name")
+        raise SceneError(
+            f"obstacle {number}: name must be a non-empty string, got {name!r}", field="name"
+        )
     unknown = sorted(set(entry) - {"name", "position", "rpy", "scale", *_SHAPES})
     if unknown:
-        raise SceneError(f"obstacle {name!r}: unknown field {unknown[0]!r} (a shape is one of "
-                         f"{', '.join(_SHAPES)}; then position, rpy, scale)",
-                         obstacle=name, field=unknown[0])
+        raise SceneError(
+            f"obstacle {name!r}: unknown field {unknown[0]!r} (a shape is one of "
+            f"{', '.join(_SHAPES)}; then position, rpy, scale)",
+            obstacle=name,
+            field=unknown[0],
+        )
     kinds = [k for k in _SHAPES if k in entry]
     if len(kinds) != 1:
-        raise SceneError(f"obstacle {name!r}: give exactly one shape ({', '.join(_SHAPES)}), got "
-                         f"{', '.join(kinds) or 'none'}", obstacle=name, field="shape")
+        raise SceneError(
+            f"obstacle {name!r}: give exactly one shape ({', '.join(_SHAPES)}), got "
+            f"{', '.join(kinds) or 'none'}",
+            obstacle=name,
+            field="shape",
+        )
     kind = kinds[0]
     value = entry[kind]
     if "scale" in entry and kind != "mesh":
-        raise SceneError(f"obstacle {name!r}: scale applies to a mesh only", obstacle=name,
-                         field="scale")
+        raise SceneError(
+            f"obstacle {name!r}: scale applies to a mesh only", obstacle=name, field="scale"
+        )
     shape: Shape
     if kind == "box":
         shape = Box(_vector(name, "box", value, 3))  # type: ignore[arg-type]
@@ -271,17 +302,27 @@ def _obstacle(entry: dict[str, object], number: int, folder: Path) -> Obstacle:
         shape = HalfSpace(v[:3], v[3])  # type: ignore[arg-type]
     else:
         if not isinstance(value, str) or not value:
-            raise SceneError(f"obstacle {name!r}: mesh must be a file name, got {value!r}",
-                             obstacle=name, field="mesh")
+            raise SceneError(
+                f"obstacle {name!r}: mesh must be a file name, got {value!r}",
+                obstacle=name,
+                field="mesh",
+            )
         scale = _number(name, "scale", entry.get("scale", 1.0))
         shape = Mesh((folder / value).resolve(), scale)
-    return Obstacle(name, shape, entry.get("position", (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
-                    entry.get("rpy", (0.0, 0.0, 0.0)))  # type: ignore[arg-type]
+    return Obstacle(
+        name,
+        shape,
+        entry.get("position", (0.0, 0.0, 0.0)),  # type: ignore[arg-type]
+        entry.get("rpy", (0.0, 0.0, 0.0)),
+    )  # type: ignore[arg-type]
 
 
 def _vector(name: str, what: str, value: ArrayLike, size: int) -> tuple[float, ...]:
-    bad = SceneError(f"obstacle {name!r}: {what} must be {size} finite numbers, got {value!r}",
-                     obstacle=name, field=what)
+    bad = SceneError(
+        f"obstacle {name!r}: {what} must be {size} finite numbers, got {value!r}",
+        obstacle=name,
+        field=what,
+    )
     if isinstance(value, str | bytes) or isinstance(value, bool):
         raise bad
     try:
@@ -295,8 +336,11 @@ def _vector(name: str, what: str, value: ArrayLike, size: int) -> tuple[float, .
 
 def _number(name: str, what: str, value: object) -> float:
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
-        raise SceneError(f"obstacle {name!r}: {what} must be a finite number, got {value!r}",
-                         obstacle=name, field=what)
+        raise SceneError(
+            f"obstacle {name!r}: {what} must be a finite number, got {value!r}",
+            obstacle=name,
+            field=what,
+        )
     return float(value)
 
 
@@ -304,13 +348,19 @@ def _check_shape(name: str, shape: Shape) -> None:
     def positive(field_: str, *values: float) -> None:
         for v in values:
             if not (isinstance(v, int | float) and math.isfinite(v) and v > 0.0):
-                raise SceneError(f"obstacle {name!r}: {field_} must be > 0 [m], got {v!r}",
-                                 obstacle=name, field=field_)
+                raise SceneError(
+                    f"obstacle {name!r}: {field_} must be > 0 [m], got {v!r}",
+                    obstacle=name,
+                    field=field_,
+                )
 
     if isinstance(shape, Box):
         if np.shape(shape.size) != (3,):
-            raise SceneError(f"obstacle {name!r}: box is 3 sizes x, y, z [m], got "
-                             f"{shape.size!r}", obstacle=name, field="box")
+            raise SceneError(
+                f"obstacle {name!r}: box is 3 sizes x, y, z [m], got {shape.size!r}",
+                obstacle=name,
+                field="box",
+            )
         positive("box", *shape.size)
     elif isinstance(shape, Sphere):
         positive("sphere", shape.radius)
@@ -320,17 +370,26 @@ def _check_shape(name: str, shape: Shape) -> None:
         if isinstance(shape, Cylinder):
             positive("cylinder length", shape.length)
         elif not (math.isfinite(shape.length) and shape.length >= 0.0):
-            raise SceneError(f"obstacle {name!r}: capsule length must be ≥ 0 [m], got "
-                             f"{shape.length!r}", obstacle=name, field="capsule")
+            raise SceneError(
+                f"obstacle {name!r}: capsule length must be ≥ 0 [m], got {shape.length!r}",
+                obstacle=name,
+                field="capsule",
+            )
     elif isinstance(shape, HalfSpace):
         n = np.asarray(shape.normal, dtype=float)
         if n.shape != (3,) or not np.all(np.isfinite(n)) or np.linalg.norm(n) < 1e-9:
-            raise SceneError(f"obstacle {name!r}: the half-space's normal must be a non-zero "
-                             f"vector of 3 numbers, got {shape.normal!r}", obstacle=name,
-                             field="halfspace")
+            raise SceneError(
+                f"obstacle {name!r}: the half-space's normal must be a non-zero "
+                f"vector of 3 numbers, got {shape.normal!r}",
+                obstacle=name,
+                field="halfspace",
+            )
         if not math.isfinite(shape.offset):
-            raise SceneError(f"obstacle {name!r}: the half-space's offset must be finite",
-                             obstacle=name, field="halfspace")
+            raise SceneError(
+                f"obstacle {name!r}: the half-space's offset must be finite",
+                obstacle=name,
+                field="halfspace",
+            )
         scale = float(np.linalg.norm(n))
         object.__setattr__(shape, "normal", tuple(float(x) for x in n / scale))
         object.__setattr__(shape, "offset", float(shape.offset) / scale)
@@ -338,13 +397,22 @@ def _check_shape(name: str, shape: Shape) -> None:
         path = Path(shape.path)
         if not path.is_file():
             state = "is not a file" if path.exists() else "does not exist"
-            raise SceneError(f"obstacle {name!r}: the mesh file {shape.path} {state}",
-                             obstacle=name, field="mesh")
+            raise SceneError(
+                f"obstacle {name!r}: the mesh file {shape.path} {state}",
+                obstacle=name,
+                field="mesh",
+            )
         positive("scale", shape.scale)
         if not 1e-6 <= shape.scale <= 1e6:
-            raise SceneError(f"obstacle {name!r}: scale must be within [1e-6, 1e6], got "
-                             f"{shape.scale!r}", obstacle=name, field="scale")
+            raise SceneError(
+                f"obstacle {name!r}: scale must be within [1e-6, 1e6], got {shape.scale!r}",
+                obstacle=name,
+                field="scale",
+            )
     else:
-        raise SceneError(f"obstacle {name!r}: unknown shape {type(shape).__name__} (Box, "
-                         "Sphere, Cylinder, Capsule, HalfSpace, Mesh)", obstacle=name,
-                         field="shape")
+        raise SceneError(
+            f"obstacle {name!r}: unknown shape {type(shape).__name__} (Box, "
+            "Sphere, Cylinder, Capsule, HalfSpace, Mesh)",
+            obstacle=name,
+            field="shape",
+        )

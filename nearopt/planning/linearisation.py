@@ -90,11 +90,12 @@ def row_path_jacobian(
     du_dq, du_dv, mass = robot.inverse_dynamics_derivatives(
         th, lam[node, None] * dth, b[node, None] * p.ddtheta[node] + acc[:, None] * dth
     )
-    d_order = (du_dq, lam[node, None, None] * du_dv + acc[:, None, None] * mass,
-               b[node, None, None] * mass)
-    torque = sum(
-        np.einsum("rab,rj->arjb", d, basis.knots[o][node]) for o, d in enumerate(d_order)
+    d_order = (
+        du_dq,
+        lam[node, None, None] * du_dv + acc[:, None, None] * mass,
+        b[node, None, None] * mass,
     )
+    torque = sum(np.einsum("rab,rj->arjb", d, basis.knots[o][node]) for o, d in enumerate(d_order))
     torque = torque.reshape(n, 2 * big_n, k_count * n)
     parts.append(sp.coo_matrix(torque.reshape(n * 2 * big_n, k_count * n)))
 
@@ -109,9 +110,12 @@ def row_path_jacobian(
 
     rows = disc.blocks.acceleration
     sample, joint = disc.location[rows], disc.joint[rows]
-    joint_rows(rows, np.ones(sample.size),
-               acc[sample, None] * basis.knots[1][node[sample]]
-               + b[node[sample], None] * basis.knots[2][node[sample]])
+    joint_rows(
+        rows,
+        np.ones(sample.size),
+        acc[sample, None] * basis.knots[1][node[sample]]
+        + b[node[sample], None] * basis.knots[2][node[sample]],
+    )
     rows = disc.blocks.speed
     knot, joint = disc.location[rows], disc.joint[rows]
     joint_rows(rows, 2.0 * b[knot] * p.dtheta[knot, joint], basis.knots[1][knot])
@@ -126,19 +130,25 @@ def row_path_jacobian(
     # curvature terms, second differences along the segment, are left out: O(Δσ²) smaller)
     rows = disc.blocks.torque_between
     k, w, joint = disc.location[rows], disc.position[rows], disc.joint[rows]
-    parts.append(sp.coo_matrix((1.0 - w)[:, None] * torque[joint, k]
-                               + w[:, None] * torque[joint, big_n + k]))
+    parts.append(
+        sp.coo_matrix((1.0 - w)[:, None] * torque[joint, k] + w[:, None] * torque[joint, big_n + k])
+    )
     rows = disc.blocks.acceleration_between
     k, w = disc.location[rows], disc.position[rows]
     a_k = (np.diff(b) / (2.0 * disc.ds))[k]  # the segment's path acceleration
-    at_ends = [a_k[:, None] * basis.knots[1][knot] + b[knot, None] * basis.knots[2][knot]
-               for knot in (k, k + 1)]
+    at_ends = [
+        a_k[:, None] * basis.knots[1][knot] + b[knot, None] * basis.knots[2][knot]
+        for knot in (k, k + 1)
+    ]
     joint_rows(rows, np.ones(k.size), (1.0 - w)[:, None] * at_ends[0] + w[:, None] * at_ends[1])
     rows = disc.blocks.speed_between
     k, w, joint = disc.location[rows], disc.position[rows], disc.joint[rows]
-    joint_rows(rows, np.ones(k.size),
-               ((1.0 - w) * 2.0 * b[k] * p.dtheta[k, joint])[:, None] * basis.knots[1][k]
-               + (w * 2.0 * b[k + 1] * p.dtheta[k + 1, joint])[:, None] * basis.knots[1][k + 1])
+    joint_rows(
+        rows,
+        np.ones(k.size),
+        ((1.0 - w) * 2.0 * b[k] * p.dtheta[k, joint])[:, None] * basis.knots[1][k]
+        + (w * 2.0 * b[k + 1] * p.dtheta[k + 1, joint])[:, None] * basis.knots[1][k + 1],
+    )
     out = sp.vstack(parts).tocsr()
     out.eliminate_zeros()
     return out

@@ -229,8 +229,9 @@ def paper_iterations(
                     if np.any(theta < lim.position_lower) or np.any(theta > lim.position_upper):
                         continue
                 try:
-                    timing = optimal_timing(robot, candidate, cost, grid=grid,
-                                            velocity_limits=velocity_limits)
+                    timing = optimal_timing(
+                        robot, candidate, cost, grid=grid, velocity_limits=velocity_limits
+                    )
                 except (InfeasiblePathError, SolverError):
                     continue
                 evaluations += 1
@@ -244,8 +245,10 @@ def paper_iterations(
                 delta_t /= 2.0
         if best is None or best[0].objective >= current.objective:
             reason = StopReason.NO_PROGRESS
-            message = (f"could not improve: no step of the paper's update lowers J in {trials} "
-                       f"trials of α (down to {alpha:.2g}) and Δt (down to {delta_t:.2g} t_e)")
+            message = (
+                f"could not improve: no step of the paper's update lowers J in {trials} "
+                f"trials of α (down to {alpha:.2g}) and Δt (down to {delta_t:.2g} t_e)"
+            )
             break
         gain = current.objective - best[0].objective
         current, path = best

@@ -167,7 +167,8 @@ def plan(
     ):
         if not isinstance(value, int | np.integer) or not low <= value <= high:
             raise ConfigurationError(
-                f"{name} must be an integer ≥ {low}" + (f" and ≤ {high}" if high < np.inf else "")
+                f"{name} must be an integer ≥ {low}"
+                + (f" and ≤ {high}" if high < np.inf else "")
                 + f", got {value!r}"
             )
     if not (time_limit > 0):
@@ -216,23 +217,41 @@ def plan(
     if collisions is not None:
         if vias and not collisions.path_clearance(line).certified:
             start, sigma = _around_obstacles(
-                collisions, points, options, bounds,
-                min(max(0.25 * (t_start + time_limit - time.perf_counter()), 1e-3), 5.0))
+                collisions,
+                points,
+                options,
+                bounds,
+                min(max(0.25 * (t_start + time_limit - time.perf_counter()), 1e-3), 5.0),
+            )
             line, via_s = start, tuple(float(x) for x in sigma)
         if not vias and not collisions.path_clearance(line).certified:
             k = options.control_points
             breaks = knot_breaks(options, k)
             # a few OMPL paths (around the obstacles on different sides), the cheapest first
             starts = collision_free_path(
-                collisions, q0, qe, control_points=k, breaks=breaks, attempts=5,
-                time_limit=min(max(0.25 * (t_start + time_limit - time.perf_counter()), 1e-3),
-                               5.0),
+                collisions,
+                q0,
+                qe,
+                control_points=k,
+                breaks=breaks,
+                attempts=5,
+                time_limit=min(max(0.25 * (t_start + time_limit - time.perf_counter()), 1e-3), 5.0),
             )
             timed = []
             for candidate in starts:
                 try:
-                    timed.append((optimal_timing(robot, candidate, cost, grid=options.grid,
-                                                 velocity_limits=velocity_limits).J, candidate))
+                    timed.append(
+                        (
+                            optimal_timing(
+                                robot,
+                                candidate,
+                                cost,
+                                grid=options.grid,
+                                velocity_limits=velocity_limits,
+                            ).J,
+                            candidate,
+                        )
+                    )
                 except (InfeasiblePathError, SolverError):
                     continue
             if not timed:
@@ -242,18 +261,30 @@ def plan(
             timed.sort(key=lambda x: x[0])
             start = line = timed[0][1]
             if method == Method.SCP and max_iterations > SCREENING and len(timed) > 1:
-                line, start = _screen(robot, q0, qe, cost, [c for _, c in timed[:3]],
-                                      velocity_limits=velocity_limits,
-                                      position_limits=position_limits, options=options,
-                                      collisions=collisions,
-                                      deadline=t_start + time_limit)
+                line, start = _screen(
+                    robot,
+                    q0,
+                    qe,
+                    cost,
+                    [c for _, c in timed[:3]],
+                    velocity_limits=velocity_limits,
+                    position_limits=position_limits,
+                    options=options,
+                    collisions=collisions,
+                    deadline=t_start + time_limit,
+                )
     try:
-        initial = optimal_timing(robot, line, cost, grid=grid, velocity_limits=velocity_limits,
-                                 time_limit=t_start + time_limit - time.perf_counter())
+        initial = optimal_timing(
+            robot,
+            line,
+            cost,
+            grid=grid,
+            velocity_limits=velocity_limits,
+            time_limit=t_start + time_limit - time.perf_counter(),
+        )
     except SolverError as exc:
         what = "the straight line" if start is None else "the collision-free start"
-        raise SolverError(f"no plan: timing {what} failed: {exc}",
-                          status=exc.status) from exc
+        raise SolverError(f"no plan: timing {what} failed: {exc}", status=exc.status) from exc
     history: list[Iteration] = []
     best: list[TimingResult] = [initial]  # the last accepted iterate's timing (the best)
 
@@ -265,12 +296,23 @@ def plan(
         if callback is not None:
             callback(entry)
 
-    common = dict(grid=grid, velocity_limits=velocity_limits, position_limits=position_limits,
-                  options=options, max_iterations=max_iterations,
-                  deadline=t_start + time_limit, t_start=t_start, accept=accept)
+    common = dict(
+        grid=grid,
+        velocity_limits=velocity_limits,
+        position_limits=position_limits,
+        options=options,
+        max_iterations=max_iterations,
+        deadline=t_start + time_limit,
+        t_start=t_start,
+        accept=accept,
+    )
     if max_iterations == 0 or method == Method.PAPER:
-        accept(Iteration(0, initial.objective, None, initial.duration,
-                         time.perf_counter() - t_start, line), initial)
+        accept(
+            Iteration(
+                0, initial.objective, None, initial.duration, time.perf_counter() - t_start, line
+            ),
+            initial,
+        )
     if max_iterations == 0:
         timing, reason, evaluations = initial, StopReason.ITERATION_LIMIT, 1
         first = "the straight line" if start is None else "the first path"
@@ -278,12 +320,14 @@ def plan(
     else:
         try:
             if method == Method.SCP:
-                outcome = sequential_convex(robot, q0, qe, cost, **common,
-                                            collisions=collisions, start=start, via=via_s)
+                outcome = sequential_convex(
+                    robot, q0, qe, cost, **common, collisions=collisions, start=start, via=via_s
+                )
                 if goal is not None and optimise_goal and len(history) <= max_iterations:
                     # then θe moves along the pose, from that plan: J can only go down
-                    outcome = _free_goal(robot, q0, qe, cost, goal, outcome, common, history,
-                                         collisions, via_s)
+                    outcome = _free_goal(
+                        robot, q0, qe, cost, goal, outcome, common, history, collisions, via_s
+                    )
             else:
                 outcome = paper_iterations(robot, initial, cost, **common)
             timing, reason = outcome.timing, outcome.reason
@@ -291,13 +335,16 @@ def plan(
         except KeyboardInterrupt:  # the best plan so far, timed on the plan's grid
             timing, reason, evaluations = best[0], StopReason.INTERRUPTED, len(history) + 1
             if timing.problem.segments != initial.problem.segments:
-                timing = optimal_timing(robot, timing.trajectory.path, cost, grid=grid,
-                                        velocity_limits=velocity_limits)
+                timing = optimal_timing(
+                    robot, timing.trajectory.path, cost, grid=grid, velocity_limits=velocity_limits
+                )
             message = f"interrupted after {len(history) - 1} iterations: the best plan so far"
         if timing.J > initial.J:  # e.g. no better path: the line as a B-spline on another grid
             timing = initial
-            message += (f"; {'the straight line' if start is None else 'the first path'} is "
-                        "returned: it costs less on the plan's grid")
+            message += (
+                f"; {'the straight line' if start is None else 'the first path'} is "
+                "returned: it costs less on the plan's grid"
+            )
     return PlanResult(
         robot=robot,
         timing=timing,
@@ -317,8 +364,11 @@ def plan(
 
 
 def _around_obstacles(
-    collisions: CollisionModel, points: NDArray[np.float64], options: SCPOptions,
-    bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None], time_limit: float,
+    collisions: CollisionModel,
+    points: NDArray[np.float64],
+    options: SCPOptions,
+    bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
+    time_limit: float,
 ) -> tuple[BSplinePath, NDArray[np.float64]]:
     """A first path through via-points whose straight legs collide: each colliding leg is an
     OMPL path (RRT-Connect, certified, fitted), the legs joined into one polyline and the
@@ -331,8 +381,13 @@ def _around_obstacles(
             piece = b[None, :]
         else:
             found = collision_free_path(
-                collisions, a, b, control_points=options.control_points, breaks=None,
-                time_limit=time_limit / legs, attempts=1,
+                collisions,
+                a,
+                b,
+                control_points=options.control_points,
+                breaks=None,
+                time_limit=time_limit / legs,
+                attempts=1,
             )
             piece = found[0](np.linspace(0.0, 1.0, 4 * options.control_points + 1)[1:], 0)
         polyline.append(piece)
@@ -342,8 +397,9 @@ def _around_obstacles(
     for k in (k0, 2 * k0, 4 * k0, 8 * k0):
         if k > MAX_CONTROL_POINTS:
             break
-        path, sigma = path_through(dense, k, knot_breaks(options, k) if k == k0 else None,
-                                   exact[:-1], *bounds)
+        path, sigma = path_through(
+            dense, k, knot_breaks(options, k) if k == k0 else None, exact[:-1], *bounds
+        )
         if collisions.path_clearance(path).certified:
             _check_inside(collisions.robot, path, bounds)
             return path, sigma
@@ -353,16 +409,20 @@ def _around_obstacles(
     )
 
 
-def _bounds(robot: Robot, position_limits: bool
-            ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+def _bounds(
+    robot: Robot, position_limits: bool
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
     """The position limits a first path through via-points keeps, when they are enforced."""
     if not position_limits:
         return None, None
     return robot.limits.position_lower, robot.limits.position_upper
 
 
-def _check_inside(robot: Robot, path: BSplinePath,
-                  bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]) -> None:
+def _check_inside(
+    robot: Robot,
+    path: BSplinePath,
+    bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
+) -> None:
     """A first path whose control points leave the position limits is refused, naming the
     joint (its curve could leave them; stage 2 starts from feasible paths only)."""
     lower, upper = bounds
@@ -380,7 +440,9 @@ def _check_inside(robot: Robot, path: BSplinePath,
 
 
 def _via_points(
-    robot: Robot, via: Sequence[ArrayLike | ToolPose] | None, q0: NDArray[np.float64],
+    robot: Robot,
+    via: Sequence[ArrayLike | ToolPose] | None,
+    q0: NDArray[np.float64],
     position_limits: bool,
 ) -> list[NDArray[np.float64]]:
     """The via-points as joint vectors (tool poses by inverse kinematics from the previous
@@ -388,8 +450,11 @@ def _via_points(
     if via is None:
         return []
     flat = isinstance(via, np.ndarray) and via.ndim == 1
-    if flat or not isinstance(via, Sequence | np.ndarray) or isinstance(via, str) or any(
-        isinstance(v, int | float | np.number) for v in via
+    if (
+        flat
+        or not isinstance(via, Sequence | np.ndarray)
+        or isinstance(via, str)
+        or any(isinstance(v, int | float | np.number) for v in via)
     ):
         raise ConfigurationError(
             f"via is a list of via-points, each a joint vector of {robot.n} values or a "
@@ -410,8 +475,12 @@ def _via_points(
 
 
 def _clear_solution(
-    robot: Robot, goal: ToolPose, q0: NDArray[np.float64], qe: NDArray[np.float64],
-    collisions: CollisionModel, tries: int = 20,
+    robot: Robot,
+    goal: ToolPose,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    collisions: CollisionModel,
+    tries: int = 20,
 ) -> NDArray[np.float64]:
     """An inverse-kinematics solution of the goal pose clear of the margin: ``qe`` if it is,
     else one from seeded random starts (``qe`` when none is: the caller reports it)."""
@@ -432,9 +501,16 @@ def _clear_solution(
 
 
 def _free_goal(
-    robot: Robot, q0: NDArray[np.float64], qe: NDArray[np.float64], cost: Cost, goal: ToolPose,
-    first: MethodOutcome, common: dict[str, object], history: list[Iteration],
-    collisions: CollisionModel | None, via: tuple[float, ...] = (),
+    robot: Robot,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    cost: Cost,
+    goal: ToolPose,
+    first: MethodOutcome,
+    common: dict[str, object],
+    history: list[Iteration],
+    collisions: CollisionModel | None,
+    via: tuple[float, ...] = (),
 ) -> MethodOutcome:
     """Stage 2 continued from ``first`` with θe free along the goal pose; its iterates follow
     the first run's in the history (its iterate 0, the same path, is not repeated)."""
@@ -445,20 +521,37 @@ def _free_goal(
         if entry.index > 0:
             accept(replace(entry, index=entry.index + offset), timing)  # type: ignore[operator]
 
-    options = dict(common, accept=follow,
-                   max_iterations=int(common["max_iterations"]) - offset)  # type: ignore[call-overload]
-    second = sequential_convex(robot, q0, qe, cost, **options, collisions=collisions,
-                               start=first.timing.trajectory.path, goal=goal, via=via)
+    options = dict(common, accept=follow, max_iterations=int(common["max_iterations"]) - offset)  # type: ignore[call-overload]
+    second = sequential_convex(
+        robot,
+        q0,
+        qe,
+        cost,
+        **options,
+        collisions=collisions,
+        start=first.timing.trajectory.path,
+        goal=goal,
+        via=via,
+    )
     if second.timing.J > first.timing.J:  # e.g. re-timed on another grid: keep the first
         return first
-    return MethodOutcome(second.timing, second.reason, second.message,
-                         first.evaluations + second.evaluations)
+    return MethodOutcome(
+        second.timing, second.reason, second.message, first.evaluations + second.evaluations
+    )
 
 
 def _screen(
-    robot: Robot, q0: NDArray[np.float64], qe: NDArray[np.float64], cost: Cost,
-    candidates: list[BSplinePath], *, velocity_limits: bool, position_limits: bool,
-    options: SCPOptions, collisions: CollisionModel, deadline: float,
+    robot: Robot,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    cost: Cost,
+    candidates: list[BSplinePath],
+    *,
+    velocity_limits: bool,
+    position_limits: bool,
+    options: SCPOptions,
+    collisions: CollisionModel,
+    deadline: float,
 ) -> tuple[BSplinePath, BSplinePath]:
     """The first path stage 2 continues from: each OMPL candidate improved by
     :data:`SCREENING` iterations on the iterate grid, the best kept (the order of the candidates'
@@ -468,10 +561,20 @@ def _screen(
     for candidate in candidates:
         try:
             outcome = sequential_convex(
-                robot, q0, qe, cost, grid=options.grid, velocity_limits=velocity_limits,
-                position_limits=position_limits, options=options, max_iterations=SCREENING,
-                deadline=deadline, t_start=time.perf_counter(), accept=lambda *_: None,
-                collisions=collisions, start=candidate,
+                robot,
+                q0,
+                qe,
+                cost,
+                grid=options.grid,
+                velocity_limits=velocity_limits,
+                position_limits=position_limits,
+                options=options,
+                max_iterations=SCREENING,
+                deadline=deadline,
+                t_start=time.perf_counter(),
+                accept=lambda *_: None,
+                collisions=collisions,
+                start=candidate,
             )
         except (InfeasiblePathError, SolverError):
             continue

@@ -137,28 +137,36 @@ def sequential_convex(
     scale = np.maximum.reduce([np.abs(qe - q0), 0.1 * _range(lim), np.full(n, 0.1)])
     moving = k_count + (goal is not None)  # the interior control points, and θe with a goal
     scale = np.tile(scale / (k_count - 1), moving)
-    lower = np.tile(lim.position_lower, moving) if position_limits else np.full(n * moving,
-                                                                                -np.inf)
-    upper = np.tile(lim.position_upper, moving) if position_limits else np.full(n * moving,
-                                                                                np.inf)
+    lower = np.tile(lim.position_lower, moving) if position_limits else np.full(n * moving, -np.inf)
+    upper = np.tile(lim.position_upper, moving) if position_limits else np.full(n * moving, np.inf)
 
     def path_of(p: NDArray[np.float64]) -> BSplinePath:
         end = ends[1:] if goal is None else p[-n:][None, :]
-        return BSplinePath(np.vstack([ends[:1], p[: k_count * n].reshape(k_count, n), end]),
-                           breaks)
+        return BSplinePath(np.vstack([ends[:1], p[: k_count * n].reshape(k_count, n), end]), breaks)
 
     def time_it(
-        p: NDArray[np.float64], like: TimingResult | None = None,
-        guess: NDArray[np.float64] | None = None, on: int = iterate_grid,
+        p: NDArray[np.float64],
+        like: TimingResult | None = None,
+        guess: NDArray[np.float64] | None = None,
+        on: int = iterate_grid,
     ) -> TimingResult:
-        return optimal_timing(robot, path_of(p), cost, grid=on, velocity_limits=velocity_limits,
-                              guess=guess, margins=None if like is None else like.problem)
+        return optimal_timing(
+            robot,
+            path_of(p),
+            cost,
+            grid=on,
+            velocity_limits=velocity_limits,
+            guess=guess,
+            margins=None if like is None else like.problem,
+        )
 
-    p = start.control_points[1:-1 if goal is None else None].ravel()
+    p = start.control_points[1 : -1 if goal is None else None].ravel()
     timing = time_it(p)
     evaluations, index, small, failures = 1, 0, 0, 0
-    accept(Iteration(0, timing.objective, None, timing.duration,
-                     time.perf_counter() - t_start, start), timing)
+    accept(
+        Iteration(0, timing.objective, None, timing.duration, time.perf_counter() - t_start, start),
+        timing,
+    )
     basis = None
     radius = options.trust_radius
     reason, message = StopReason.ITERATION_LIMIT, f"{max_iterations} iterations"
@@ -172,17 +180,20 @@ def sequential_convex(
             basis = path_basis(timing.trajectory.path, disc, end=goal is not None)
         model = _model(disc, z, row_path_jacobian(robot, disc, z, basis), radius * scale)
         if collisions is not None:
-            model = _with_rows(model, *collision_rows(collisions, path_of(p), radius * scale[:n],
-                                                       end=goal is not None))
+            model = _with_rows(
+                model,
+                *collision_rows(collisions, path_of(p), radius * scale[:n], end=goal is not None),
+            )
         if via:  # every iterate goes through the via-points: B(σ_v) Δp = 0 per joint
-            at = start.basis(np.asarray(via))[:, 1:None if goal is not None else -1]
+            at = start.basis(np.asarray(via))[:, 1 : None if goal is not None else -1]
             rows = sp.csr_matrix(np.kron(at, np.eye(n)))
             model = _with_rows(model, rows, np.zeros(rows.shape[0]), np.zeros(rows.shape[0]))
         if goal is not None:  # θe moves along the pose: J_task Δθe = 0
             task = task_jacobian(robot, goal, p[-n:])
             rows = sp.hstack([sp.csr_matrix((task.shape[0], p.size - n)), sp.csr_matrix(task)])
-            model = _with_rows(model, rows.tocsr(), np.zeros(task.shape[0]),
-                               np.zeros(task.shape[0]))
+            model = _with_rows(
+                model, rows.tocsr(), np.zeros(task.shape[0]), np.zeros(task.shape[0])
+            )
         j0 = timing.objective
         step = _solve_model(disc, weights, model, p, radius * scale, lower, upper)
         if step is None:  # numerical trouble: a smaller step is a better-conditioned model
@@ -196,8 +207,10 @@ def sequential_convex(
         dp, predicted, z_model = step
         if j0 - predicted <= options.tolerance * abs(j0):
             reason = StopReason.CONVERGED
-            message = (f"converged: the convex model finds no path that lowers J by more than "
-                       f"{options.tolerance:g} relative")
+            message = (
+                f"converged: the convex model finds no path that lowers J by more than "
+                f"{options.tolerance:g} relative"
+            )
             break
         trial = None
         p_trial = p + dp
@@ -219,9 +232,17 @@ def sequential_convex(
         if gain > 0.0:
             p, timing = p_trial, trial
             index += 1
-            accept(Iteration(index, timing.objective, float(np.max(np.abs(dp))),
-                             timing.duration, time.perf_counter() - t_start,
-                             timing.trajectory.path), timing)
+            accept(
+                Iteration(
+                    index,
+                    timing.objective,
+                    float(np.max(np.abs(dp))),
+                    timing.duration,
+                    time.perf_counter() - t_start,
+                    timing.trajectory.path,
+                ),
+                timing,
+            )
             if ratio > 0.75 and boundary:
                 radius *= 2.0
             elif ratio < 0.25:
@@ -229,23 +250,29 @@ def sequential_convex(
             small = small + 1 if gain < options.tolerance * abs(j0) else 0
             if small == 3:
                 reason = StopReason.CONVERGED
-                message = (f"converged: J changed by less than {options.tolerance:g} relative "
-                           "in each of the last 3 iterations")
+                message = (
+                    f"converged: J changed by less than {options.tolerance:g} relative "
+                    "in each of the last 3 iterations"
+                )
                 break
         else:
             radius = 0.25 * reach
         if radius < options.min_trust_radius:
             reason = StopReason.CONVERGED
-            message = (f"converged: no step longer than {options.min_trust_radius:g} of the "
-                       "joints' scale lowers J")
+            message = (
+                f"converged: no step longer than {options.min_trust_radius:g} of the "
+                "joints' scale lowers J"
+            )
             break
     if iterate_grid < grid:  # the returned path on the plan's own grid
         try:
             timing = time_it(p, on=grid)
             evaluations += 1
         except (InfeasiblePathError, SolverError) as exc:  # keep the iterate's own timing
-            message += (f"; timed on the iterate grid ({iterate_grid} segments): on the plan's "
-                        f"grid stage 1 failed ({exc})")
+            message += (
+                f"; timed on the iterate grid ({iterate_grid} segments): on the plan's "
+                f"grid stage 1 failed ({exc})"
+            )
     return MethodOutcome(timing, reason, message, evaluations)
 
 
@@ -263,8 +290,11 @@ def knot_breaks(options: SCPOptions, count: int) -> NDArray[np.float64] | None:
 
 
 def collision_rows(
-    collisions: CollisionModel, path: BSplinePath, reach: NDArray[np.float64],
-    checks: int = 129, end: bool = False,
+    collisions: CollisionModel,
+    path: BSplinePath,
+    reach: NDArray[np.float64],
+    checks: int = 129,
+    end: bool = False,
 ) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
     """The clearances at ``checks`` uniform σ, linearised in the interior control points:
 
@@ -284,7 +314,7 @@ def collision_rows(
     inner = collisions.margin + max(0.25 * collisions.margin, 1e-3)
     sigma = np.linspace(0.0, 1.0, checks)
     q = path(sigma)
-    basis = path.basis(sigma)[:, 1:None if end else -1]  # (S, K), or K + 1 with the end
+    basis = path.basis(sigma)[:, 1 : None if end else -1]  # (S, K), or K + 1 with the end
     dist = np.array([collisions.distances(x) for x in q])  # (S, P)
     # how far the step can move each pair, at most ACTIVATION: farther pairs wait for the next
     # iterate (a step that brings one into contact fails the certificate and is rejected)
@@ -309,7 +339,9 @@ def collision_rows(
 
 
 def _with_rows(
-    model: _Model, path_rows: sp.csr_matrix, lower: NDArray[np.float64],
+    model: _Model,
+    path_rows: sp.csr_matrix,
+    lower: NDArray[np.float64],
     upper: NDArray[np.float64] | None = None,
 ) -> _Model:
     """The model with rows ``lower ≤ path_rows Δp ≤ upper`` (default no upper bound) that do
@@ -319,9 +351,12 @@ def _with_rows(
     upper = np.full(lower.size, np.inf) if upper is None else upper
     z_cols = model.matrix.shape[1] - path_rows.shape[1]
     rows = sp.hstack([sp.csr_matrix((lower.size, z_cols)), path_rows]).tocsr()
-    return replace(model, matrix=sp.vstack([model.matrix, rows]).tocsr(),
-                   lower=np.concatenate([model.lower, lower]),
-                   upper=np.concatenate([model.upper, upper]))
+    return replace(
+        model,
+        matrix=sp.vstack([model.matrix, rows]).tocsr(),
+        lower=np.concatenate([model.lower, lower]),
+        upper=np.concatenate([model.upper, upper]),
+    )
 
 
 def _onto(robot: Robot, goal: ToolPose, q: NDArray[np.float64]) -> NDArray[np.float64] | None:
@@ -333,8 +368,11 @@ def _onto(robot: Robot, goal: ToolPose, q: NDArray[np.float64]) -> NDArray[np.fl
 
 
 def path_through(
-    points: NDArray[np.float64], interior: int, breaks: NDArray[np.float64] | None = None,
-    exact: Sequence[int] | None = None, lower: NDArray[np.float64] | None = None,
+    points: NDArray[np.float64],
+    interior: int,
+    breaks: NDArray[np.float64] | None = None,
+    exact: Sequence[int] | None = None,
+    lower: NDArray[np.float64] | None = None,
     upper: NDArray[np.float64] | None = None,
 ) -> tuple[BSplinePath, NDArray[np.float64]]:
     """A B-spline from ``points[0]`` to ``points[-1]`` along the polyline through ``points``,
@@ -373,17 +411,23 @@ def path_through(
         step = inner.T @ np.linalg.solve(inner @ inner.T, miss)
         if lower is not None and upper is not None:
             inside = control[1:-1] + step
-            for j in np.flatnonzero(np.any(inside < lower - 1e-12, axis=0)
-                                    | np.any(inside > upper + 1e-12, axis=0)):
-                step[:, j] = _bounded_step(inner, miss[:, j], control[1:-1, j], lower[j],
-                                           upper[j], step[:, j])
+            for j in np.flatnonzero(
+                np.any(inside < lower - 1e-12, axis=0) | np.any(inside > upper + 1e-12, axis=0)
+            ):
+                step[:, j] = _bounded_step(
+                    inner, miss[:, j], control[1:-1, j], lower[j], upper[j], step[:, j]
+                )
         control[1:-1] += step
     return BSplinePath(control, breaks), sigma
 
 
 def _bounded_step(
-    inner: NDArray[np.float64], miss: NDArray[np.float64], control: NDArray[np.float64],
-    lower: float, upper: float, fallback: NDArray[np.float64],
+    inner: NDArray[np.float64],
+    miss: NDArray[np.float64],
+    control: NDArray[np.float64],
+    lower: float,
+    upper: float,
+    fallback: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """min ½|x|² s.t. inner x = miss, lower ≤ control + x ≤ upper (one joint), by Clarabel;
     ``fallback`` if it has no solution."""
@@ -406,9 +450,14 @@ def _bounded_step(
         cones.append(clarabel.NonnegativeConeT(sum(bounds)))
     settings = clarabel.DefaultSettings()
     settings.verbose = False
-    solver = clarabel.DefaultSolver(sp.identity(k, format="csc"), np.zeros(k),
-                                    sp.vstack(rows, format="csc"), np.concatenate(rhs), cones,
-                                    settings)
+    solver = clarabel.DefaultSolver(
+        sp.identity(k, format="csc"),
+        np.zeros(k),
+        sp.vstack(rows, format="csc"),
+        np.concatenate(rhs),
+        cones,
+        settings,
+    )
     solution = solver.solve()
     if solution.status != clarabel.SolverStatus.Solved:
         return fallback
@@ -448,13 +497,15 @@ def _model(
     half their slack."""
     rows = disc.linear_rows(z)  # the damping's tangent at z
     value = disc.values(z)
-    span = np.where(np.isfinite(disc.lower), 0.5 * (disc.upper - disc.lower),
-                    np.abs(disc.upper))
+    span = np.where(np.isfinite(disc.lower), 0.5 * (disc.upper - disc.lower), np.abs(disc.upper))
     slack = np.minimum(disc.upper - value, value - disc.lower)
     moved = abs(jac) @ reach
     keep = (slack <= np.where(np.isfinite(disc.lower), 0.5, 0.75) * span) | (slack <= 2.0 * moved)
-    for block in (disc.blocks.torque_between, disc.blocks.acceleration_between,
-                  disc.blocks.speed_between):
+    for block in (
+        disc.blocks.torque_between,
+        disc.blocks.acceleration_between,
+        disc.blocks.speed_between,
+    ):
         keep[block] = False
     # a speed row b θ'_i² ≤ v_i² is taken in its bound form b ≤ v_i²/θ'_i², whose tangent in θ'
     # lies below the convex bound: what the model allows, the exact row allows too
@@ -475,8 +526,10 @@ def _model(
     const = disc.upper[torque] - rows.upper[torque]
     # the torque rows' limits become bounds of the torque variables (±inf where not kept)
     held = keep[torque]
-    limits = (np.where(held, disc.lower[torque], -np.inf),
-              np.where(held, disc.upper[torque], np.inf))
+    limits = (
+        np.where(held, disc.lower[torque], -np.inf),
+        np.where(held, disc.upper[torque], np.inf),
+    )
     keep[torque] = False
     keep = np.flatnonzero(keep)
     return _Model(keep, matrix[keep], lower[keep], upper[keep], matrix[torque], const, limits)
@@ -495,9 +548,14 @@ def _solve_model(
     bounds = (np.maximum(-radius, lower - p), np.minimum(radius, upper - p))
     for tolerance in (1e-8, 1e-7, 1e-6):
         sol = solve_conic(
-            disc.ds, weights, LinearRows(model.matrix, model.lower, model.upper),
-            (model.torque, model.torque_const), disc.z_upper, p_bounds=bounds,
-            torque_limits=model.torque_limits, tolerance=tolerance,
+            disc.ds,
+            weights,
+            LinearRows(model.matrix, model.lower, model.upper),
+            (model.torque, model.torque_const),
+            disc.z_upper,
+            p_bounds=bounds,
+            torque_limits=model.torque_limits,
+            tolerance=tolerance,
         )
         if is_solved(sol.status):
             return np.clip(sol.p, *bounds), sol.objective, sol.z

@@ -106,8 +106,11 @@ class Task:
         fields = {"start", "units", "frame", "target"}
         unknown = sorted(set(data) - fields)
         if unknown:
-            raise TaskError(f"{path}: unknown field {unknown[0]!r} (the fields are start, units, "
-                            "frame and [[target]] tables)", field=unknown[0])
+            raise TaskError(
+                f"{path}: unknown field {unknown[0]!r} (the fields are start, units, "
+                "frame and [[target]] tables)",
+                field=unknown[0],
+            )
         units = data.get("units", "rad")
         if units not in ("rad", "deg"):
             raise TaskError(f"{path}: units must be 'rad' or 'deg', got {units!r}", field="units")
@@ -127,55 +130,85 @@ class Task:
         for number, entry in enumerate(entries, start=1):
             name = entry.get("name", f"target {number}")
             if not isinstance(name, str) or not name:
-                raise TaskError(f"{path}: target {number}: name must be a non-empty string, got "
-                                f"{name!r}", target=f"target {number}", field="name")
+                raise TaskError(
+                    f"{path}: target {number}: name must be a non-empty string, got {name!r}",
+                    target=f"target {number}",
+                    field="name",
+                )
             unknown = sorted(set(entry) - {"name", "q", "pose", "stop", "frame"})
             if unknown:
-                raise TaskError(f"{path}: target {name!r}: unknown field {unknown[0]!r} (the "
-                                "fields are name, q or pose, frame, stop)", target=name,
-                                field=unknown[0])
+                raise TaskError(
+                    f"{path}: target {name!r}: unknown field {unknown[0]!r} (the "
+                    "fields are name, q or pose, frame, stop)",
+                    target=name,
+                    field=unknown[0],
+                )
             kinds = [k for k in ("q", "pose") if k in entry]
             if len(kinds) != 1:
-                raise TaskError(f"{path}: target {name!r}: give its joint values q or its pose, "
-                                f"once (got {', '.join(kinds) or 'neither'})", target=name,
-                                field="q")
+                raise TaskError(
+                    f"{path}: target {name!r}: give its joint values q or its pose, "
+                    f"once (got {', '.join(kinds) or 'neither'})",
+                    target=name,
+                    field="q",
+                )
             stop = entry.get("stop", True)
             if not isinstance(stop, bool):
-                raise TaskError(f"{path}: target {name!r}: stop must be true or false, got "
-                                f"{stop!r}", target=name, field="stop")
+                raise TaskError(
+                    f"{path}: target {name!r}: stop must be true or false, got {stop!r}",
+                    target=name,
+                    field="stop",
+                )
             target_frame = entry.get("frame", frame)
             if target_frame is not None and not (isinstance(target_frame, str) and target_frame):
-                raise TaskError(f"{path}: target {name!r}: frame must be a frame's name, got "
-                                f"{target_frame!r}", target=name, field="frame")
+                raise TaskError(
+                    f"{path}: target {name!r}: frame must be a frame's name, got {target_frame!r}",
+                    target=name,
+                    field="frame",
+                )
             if "q" in entry:
                 if "frame" in entry:
-                    raise TaskError(f"{path}: target {name!r}: frame applies to a pose",
-                                    target=name, field="frame")
+                    raise TaskError(
+                        f"{path}: target {name!r}: frame applies to a pose",
+                        target=name,
+                        field="frame",
+                    )
                 goal: object = np.array(_numbers(entry["q"], path, "q", name, None)) * scale
             else:
                 values = _numbers(entry["pose"], path, "pose", name, (3, 7))
                 try:
                     goal = ToolPose(values[:3], values[3:] or None, target_frame)
                 except ConfigurationError as exc:
-                    raise TaskError(f"{path}: target {name!r}: {exc}", target=name,
-                                    field="pose") from None
+                    raise TaskError(
+                        f"{path}: target {name!r}: {exc}", target=name, field="pose"
+                    ) from None
             targets.append(Target(goal, stop, name))  # type: ignore[arg-type]
         return cls(tuple(targets), start, path)
 
 
-def _numbers(value: object, path: Path, field: str, target: str | None,
-             sizes: tuple[int, ...] | None) -> list[float]:
+def _numbers(
+    value: object, path: Path, field: str, target: str | None, sizes: tuple[int, ...] | None
+) -> list[float]:
     """A TOML array of finite numbers (of one of ``sizes``), else a TaskError."""
     where = f"{path}: " + (f"target {target!r}: " if target else "")
-    if not isinstance(value, list) or not all(
-        isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
-        for x in value
-    ) or not value:
-        raise TaskError(f"{where}{field} must be an array of finite numbers, got {value!r:.80}",
-                        target=target, field=field)
+    if (
+        not isinstance(value, list)
+        or not all(
+            isinstance(x, int | float) and not isinstance(x, bool) and math.isfinite(x)
+            for x in value
+        )
+        or not value
+    ):
+        raise TaskError(
+            f"{where}{field} must be an array of finite numbers, got {value!r:.80}",
+            target=target,
+            field=field,
+        )
     if sizes is not None and len(value) not in sizes:
-        raise TaskError(f"{where}{field} takes x y z [m] or x y z qx qy qz qw, got "
-                        f"{len(value)} numbers", target=target, field=field)
+        raise TaskError(
+            f"{where}{field} takes x y z [m] or x y z qx qy qz qw, got {len(value)} numbers",
+            target=target,
+            field=field,
+        )
     return [float(x) for x in value]
 
 
@@ -254,7 +287,7 @@ class TaskResult:
         out, k = [], 0
         for segment in self.segments:
             size = len(segment.via) + 1
-            out.append(self.targets[k:k + size])
+            out.append(self.targets[k : k + size])
             k += size
         return tuple(out)
 
@@ -282,10 +315,15 @@ class TaskResult:
         """Every target but the last as :func:`~nearopt.verify` checks it: the configuration
         reached, the pose if it is one, at rest where it is a stop."""
         return tuple(
-            Waypoint(float(t), q, target.goal if isinstance(target.goal, ToolPose) else None,
-                     target.stop)
-            for t, q, target in zip(self.target_times[:-1], self.target_configurations[:-1],
-                                    self.targets[:-1], strict=True)
+            Waypoint(
+                float(t), q, target.goal if isinstance(target.goal, ToolPose) else None, target.stop
+            )
+            for t, q, target in zip(
+                self.target_times[:-1],
+                self.target_configurations[:-1],
+                self.targets[:-1],
+                strict=True,
+            )
         )
 
     @property
@@ -363,16 +401,24 @@ self_collision
     if q0 is None:
         raise ConfigurationError("give the start configuration q0 (the task has no start)")
     cost = TimeCost() if cost is None else cost
-    if isinstance(time_limit, bool) or not isinstance(time_limit, int | float) or not (
-        time_limit > 0
+    if (
+        isinstance(time_limit, bool)
+        or not isinstance(time_limit, int | float)
+        or not (time_limit > 0)
     ):
         raise ConfigurationError(
             f"time_limit must be a positive number of seconds, got {time_limit!r}"
         )
     q0 = robot.check_configuration(q0, "q0")
-    check_targets(robot, records, q0, position_limits=position_limits,
-                  where=None if not isinstance(targets, Task) or targets.source is None
-                  else str(targets.source))
+    check_targets(
+        robot,
+        records,
+        q0,
+        position_limits=position_limits,
+        where=None
+        if not isinstance(targets, Task) or targets.source is None
+        else str(targets.source),
+    )
     collisions = collisions_for(robot, scene, margin, self_collision)
     groups: list[list[Target]] = [[]]
     for target in records:
@@ -392,18 +438,30 @@ self_collision
             if callback is not None:
                 callback(k, entry)
 
-        same = dict(method=method, options=options, grid=grid, time_limit=budget,
-                    velocity_limits=velocity_limits, position_limits=position_limits,
-                    scene=collisions, optimise_goal=optimise_goal and k == len(groups) - 1,
-                    via=[t.goal for t in group[:-1]])
+        same = dict(
+            method=method,
+            options=options,
+            grid=grid,
+            time_limit=budget,
+            velocity_limits=velocity_limits,
+            position_limits=position_limits,
+            scene=collisions,
+            optimise_goal=optimise_goal and k == len(groups) - 1,
+            via=[t.goal for t in group[:-1]],
+        )
         try:
-            segment = plan(robot, start, group[-1].goal, cost, callback=forward,
-                           max_iterations=0 if interrupted else max_iterations,
-                           **same)  # type: ignore[arg-type]
+            segment = plan(
+                robot,
+                start,
+                group[-1].goal,
+                cost,
+                callback=forward,
+                max_iterations=0 if interrupted else max_iterations,
+                **same,
+            )  # type: ignore[arg-type]
         except KeyboardInterrupt:  # before the segment had a plan: time its first path only
             interrupted = True
-            segment = plan(robot, start, group[-1].goal, cost, max_iterations=0,
-                           **same)  # type: ignore[arg-type]
+            segment = plan(robot, start, group[-1].goal, cost, max_iterations=0, **same)  # type: ignore[arg-type]
         except NearoptError as exc:  # the same error, saying which segment
             exc.args = (f"segment {k + 1} (to {names}): {exc}", *exc.args[1:])
             raise
@@ -411,8 +469,7 @@ self_collision
         segments.append(segment)
         start = segment.trajectory(segment.duration, 0)[0]
     trajectory = ChainedTrajectory([s.trajectory for s in segments])
-    message = "; ".join(f"segment {k + 1}: {s.status}, {s.message}"
-                        for k, s in enumerate(segments))
+    message = "; ".join(f"segment {k + 1}: {s.status}, {s.message}" for k, s in enumerate(segments))
     return TaskResult(
         robot=robot,
         targets=records,
@@ -425,8 +482,12 @@ self_collision
 
 
 def check_targets(
-    robot: Robot, targets: Sequence[Target], q0: NDArray[np.float64], *,
-    position_limits: bool = True, where: str | None = None,
+    robot: Robot,
+    targets: Sequence[Target],
+    q0: NDArray[np.float64],
+    *,
+    position_limits: bool = True,
+    where: str | None = None,
 ) -> None:
     """Check a task's targets against the robot before any planning: joint vectors of the right
     length, finite and within the position limits, frames the robot has, and no stop where the
@@ -447,15 +508,15 @@ def check_targets(
             try:
                 robot.frame_id(target.goal.frame)
             except NearoptError as exc:
-                raise TaskError(f"{prefix}target {name!r}: {exc}", target=name,
-                                field="frame") from None
+                raise TaskError(
+                    f"{prefix}target {name!r}: {exc}", target=name, field="frame"
+                ) from None
             same = isinstance(previous, ToolPose) and previous == target.goal
         else:
             try:
                 q = robot.check_configuration(target.goal, "q")
             except ConfigurationError as exc:
-                raise TaskError(f"{prefix}target {name!r}: {exc}", target=name,
-                                field="q") from None
+                raise TaskError(f"{prefix}target {name!r}: {exc}", target=name, field="q") from None
             if position_limits:
                 outside = np.flatnonzero((q < lim.position_lower) | (q > lim.position_upper))
                 if outside.size:
@@ -463,19 +524,30 @@ def check_targets(
                     raise TaskError(
                         f"{prefix}target {name!r}: q[{i}] = {q[i]:.6g} is outside the position "
                         f"limits [{lim.position_lower[i]:.6g}, {lim.position_upper[i]:.6g}] of "
-                        f"joint {robot.joint_names[i]!r}", target=name, field="q")
+                        f"joint {robot.joint_names[i]!r}",
+                        target=name,
+                        field="q",
+                    )
             same = not isinstance(previous, ToolPose) and np.array_equal(previous, q)
             target = Target(q, target.stop, name)
         if same:
             raise TaskError(
                 f"{prefix}target {name!r} is where the arm already is ({previous_name}): a "
-                "target must differ from the one before it", target=name,
-                field="pose" if isinstance(target.goal, ToolPose) else "q")
+                "target must differ from the one before it",
+                target=name,
+                field="pose" if isinstance(target.goal, ToolPose) else "q",
+            )
         previous, previous_name = target.goal, f"target {name!r}"
 
 
-_ORDER = (StopReason.INTERRUPTED, StopReason.SOLVER, StopReason.TIME_LIMIT,
-          StopReason.ITERATION_LIMIT, StopReason.NO_PROGRESS, StopReason.CONVERGED)
+_ORDER = (
+    StopReason.INTERRUPTED,
+    StopReason.SOLVER,
+    StopReason.TIME_LIMIT,
+    StopReason.ITERATION_LIMIT,
+    StopReason.NO_PROGRESS,
+    StopReason.CONVERGED,
+)
 
 
 def _least_settled(segments: list[PlanResult]) -> StopReason:
@@ -488,8 +560,7 @@ def _targets(targets: Sequence[Target | ArrayLike | ToolPose]) -> tuple[Target, 
         targets, Sequence | np.ndarray
     ):
         raise ConfigurationError(
-            f"targets is a list of targets (Target, joint vectors or ToolPose), got "
-            f"{targets!r:.80}"
+            f"targets is a list of targets (Target, joint vectors or ToolPose), got {targets!r:.80}"
         )
     if isinstance(targets, np.ndarray) and targets.ndim != 2:
         raise ConfigurationError(
@@ -508,13 +579,9 @@ def _targets(targets: Sequence[Target | ArrayLike | ToolPose]) -> tuple[Target, 
                 )
             target = Target(target)
         if target.goal is None:
-            raise ConfigurationError(
-                f"target {k} has no goal: give a joint vector or a ToolPose"
-            )
+            raise ConfigurationError(f"target {k} has no goal: give a joint vector or a ToolPose")
         if not isinstance(target.stop, bool | np.bool_):
-            raise ConfigurationError(
-                f"target {k}: stop must be true or false, got {target.stop!r}"
-            )
+            raise ConfigurationError(f"target {k}: stop must be true or false, got {target.stop!r}")
         if target.name is not None and not (isinstance(target.name, str) and target.name):
             raise ConfigurationError(
                 f"target {k}: name must be a non-empty string, got {target.name!r}"

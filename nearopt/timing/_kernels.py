@@ -40,8 +40,30 @@ FAST = {"nsz", "arcp", "contract", "reassoc"}
 
 
 @_jit(fastmath=FAST, error_model="numpy")
-def iterate(z, s, y, left, cl, cr, sd, node, const, e_left, e_cl, e_cr, e_d, e_node, e_const,
-            e_w, ds, scale, f_scale, tolerance, iterations, tau):  # pragma: no cover - compiled
+def iterate(
+    z,
+    s,
+    y,
+    left,
+    cl,
+    cr,
+    sd,
+    node,
+    const,
+    e_left,
+    e_cl,
+    e_cr,
+    e_d,
+    e_node,
+    e_const,
+    e_w,
+    ds,
+    scale,
+    f_scale,
+    tolerance,
+    iterations,
+    tau,
+):  # pragma: no cover - compiled
     """Run up to ``iterations`` predictor-corrector steps on (z, s, y) in place.
 
     Four passes over the rows per iteration: (1) values, derivatives, residuals, the Newton
@@ -254,8 +276,9 @@ def iterate(z, s, y, left, cl, cr, sd, node, const, e_left, e_cl, e_cr, e_d, e_n
                 dy[j] = d_y
                 r_s = -s[j] / d_s  # branch-free: the sign of a step is unpredictable
                 r_y = -y[j] / d_y
-                largest = min(largest, min(r_s if d_s < 0.0 else np.inf,
-                                           r_y if d_y < 0.0 else np.inf))
+                largest = min(
+                    largest, min(r_s if d_s < 0.0 else np.inf, r_y if d_y < 0.0 else np.inf)
+                )
                 if phase == 0:
                     cross += s[j] * d_y + y[j] * d_s
                     square += d_s * d_y
@@ -440,9 +463,24 @@ def _cut(xs, ys, count, a, b, c, tx, ty):  # pragma: no cover - compiled
 
 
 @_jit()
-def needed_inside(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b,
-                  seg_inside, in_cl, in_cr, in_off, in_d, in_w, in_lo, in_up,
-                  slack):  # pragma: no cover - compiled
+def needed_inside(
+    seg_rows,
+    row_cl,
+    row_cr,
+    row_off,
+    row_lo,
+    row_up,
+    cap_b,
+    seg_inside,
+    in_cl,
+    in_cr,
+    in_off,
+    in_d,
+    in_w,
+    in_lo,
+    in_up,
+    slack,
+):  # pragma: no cover - compiled
     """Which sides of the rows inside segments the rows at the segments' samples leave open.
 
     Segment k's samples allow (b_k, b_{k+1}) in a convex polygon: the box [0, cap_b[k]] ×
@@ -469,8 +507,9 @@ def needed_inside(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b,
     for k in range(big_n):
         if seg_inside[k] == seg_inside[k + 1]:
             continue  # no row inside this segment (those next to the rest ends: two segments)
-        count = _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack,
-                         xs, ys, tx, ty)
+        count = _polygon(
+            k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack, xs, ys, tx, ty
+        )
         if count <= 0:
             continue
         bx, by = cap_b[k], cap_b[k + 1]
@@ -493,8 +532,12 @@ def needed_inside(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b,
             elif d < 0.0:
                 hi += d * np.sqrt(b_lo)
                 lo += d * np.sqrt(b_hi)
-            size_q = abs(in_cl[q]) * bx + abs(in_cr[q]) * by + abs(in_off[q]) + abs(d) * np.sqrt(
-                max(bx, by))
+            size_q = (
+                abs(in_cl[q]) * bx
+                + abs(in_cr[q]) * by
+                + abs(in_off[q])
+                + abs(d) * np.sqrt(max(bx, by))
+            )
             if hi <= in_up[q] - slack * (size_q + abs(in_up[q])):
                 need_up[q] = False
             if lo >= in_lo[q] + slack * (size_q + abs(in_lo[q])):
@@ -503,8 +546,9 @@ def needed_inside(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b,
 
 
 @_jit()
-def _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack, xs, ys, tx,
-             ty):  # pragma: no cover - compiled
+def _polygon(
+    k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack, xs, ys, tx, ty
+):  # pragma: no cover - compiled
     """The polygon of (b_k, b_{k+1}) that segment k's sample rows allow (see
     :func:`needed_inside`), into xs, ys; its vertex count (0: empty; −1 where the box is
     unbounded or rounding left no convex polygon)."""
@@ -521,16 +565,39 @@ def _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack,
             if not np.isfinite(bound):
                 continue
             loose = slack * (size_r + abs(bound))
-            count = _cut(xs, ys, count, sign * row_cl[r], sign * row_cr[r],
-                         sign * (row_off[r] - bound) - loose, tx, ty)
+            count = _cut(
+                xs,
+                ys,
+                count,
+                sign * row_cl[r],
+                sign * row_cr[r],
+                sign * (row_off[r] - bound) - loose,
+                tx,
+                ty,
+            )
             if count <= 0:
                 return count  # empty, or not a polygon any more (−1): no use either way
     return count
 
 
 @_jit()
-def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl, pcr, poff,
-                  lo, up, slack, touch, merge):  # pragma: no cover - compiled
+def envelope_rows(
+    seg_rows,
+    row_cl,
+    row_cr,
+    row_off,
+    row_lo,
+    row_up,
+    cap_b,
+    pcl,
+    pcr,
+    poff,
+    lo,
+    up,
+    slack,
+    touch,
+    merge,
+):  # pragma: no cover - compiled
     """The rows that hold :class:`~nearopt.timing.BetweenSamples`' bound of a quantity between
     its points, where the other rows of the segment do not imply them.
 
@@ -583,8 +650,9 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
     c_lo = np.empty(per_seg, dtype=np.bool_)
     out = 0
     for k in range(big_n):
-        count = _polygon(k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack,
-                         xs, ys, tx, ty)
+        count = _polygon(
+            k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack, xs, ys, tx, ty
+        )
         bx, by = cap_b[k], cap_b[k + 1]
         found = 0
         for j in range(joints):
@@ -613,19 +681,28 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
                     hi, low = _extremes(kcl[p], kcr[p], koff[p], xs, ys, count)
                     k_abs = max(k_abs, abs(hi), abs(low))
                     if p + 1 < points:
-                        hi, low = _extremes(kcl[p + 1] - kcl[p], kcr[p + 1] - kcr[p],
-                                            koff[p + 1] - koff[p], xs, ys, count)
+                        hi, low = _extremes(
+                            kcl[p + 1] - kcl[p],
+                            kcr[p + 1] - kcr[p],
+                            koff[p + 1] - koff[p],
+                            xs,
+                            ys,
+                            count,
+                        )
                         dk_abs = max(dk_abs, abs(hi), abs(low))
-                    v_size = max(v_size, abs(pcl[k, p, j]) * bx + abs(pcr[k, p, j]) * by
-                                 + abs(poff[k, p, j]))
+                    v_size = max(
+                        v_size, abs(pcl[k, p, j]) * bx + abs(pcr[k, p, j]) * by + abs(poff[k, p, j])
+                    )
                     k_size = max(k_size, abs(kcl[p]) * bx + abs(kcr[p]) * by + abs(koff[p]))
                 size_max = v_size + 0.375 * k_size  # no sum is larger over the box
                 k_abs += dk_abs
                 reach = k_abs / 8.0
                 open_up = np.isfinite(up[j]) and (
-                    v_hi + reach > up[j] - slack * (size_max + abs(up[j])))
+                    v_hi + reach > up[j] - slack * (size_max + abs(up[j]))
+                )
                 open_lo = np.isfinite(lo[j]) and (
-                    v_lo - reach < lo[j] + slack * (size_max + abs(lo[j])))
+                    v_lo - reach < lo[j] + slack * (size_max + abs(lo[j]))
+                )
                 if not (open_up or open_lo):
                     continue
             for p in range(points - 1):
@@ -636,8 +713,14 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
                 if count > 0:
                     sign_k0 = _sign_on(kcl[p], kcr[p], koff[p], xs, ys, count)
                     sign_k1 = _sign_on(kcl[p + 1], kcr[p + 1], koff[p + 1], xs, ys, count)
-                    sign_dk = _sign_on(kcl[p + 1] - kcl[p], kcr[p + 1] - kcr[p],
-                                       koff[p + 1] - koff[p], xs, ys, count)
+                    sign_dk = _sign_on(
+                        kcl[p + 1] - kcl[p],
+                        kcr[p + 1] - kcr[p],
+                        koff[p + 1] - koff[p],
+                        xs,
+                        ys,
+                        count,
+                    )
                 for q in range(16):
                     i = p + (q >> 3)
                     at = p + ((q >> 2) & 1)
@@ -673,8 +756,16 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
                         continue
                     bound = up[j] if sign > 0.0 else lo[j]
                     loose = slack * (size_q + abs(bound))
-                    count = _cut(xs, ys, count, sign * c_cl[c], sign * c_cr[c],
-                                 sign * (c_off[c] - bound) - loose, tx, ty)
+                    count = _cut(
+                        xs,
+                        ys,
+                        count,
+                        sign * c_cl[c],
+                        sign * c_cr[c],
+                        sign * (c_off[c] - bound) - loose,
+                        tx,
+                        ty,
+                    )
                     if count <= 0:
                         break
                 if count <= 0:
@@ -711,23 +802,25 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
                 tol = merge * abs(bound) + 1e-12 * size_q
                 into = -1
                 for r in range(first, out):
-                    if (o_joint[r] != j or o_pt[r] != c_pt[c]
-                            or (o_up[r] < np.inf) != (sign > 0.0)):
+                    if o_joint[r] != j or o_pt[r] != c_pt[c] or (o_up[r] < np.inf) != (sign > 0.0):
                         continue
                     if count > 0:
-                        hi, low = _extremes(o_cl[r] - c_cl[c], o_cr[r] - c_cr[c],
-                                            o_off[r] - c_off[c], xs, ys, count)
+                        hi, low = _extremes(
+                            o_cl[r] - c_cl[c], o_cr[r] - c_cr[c], o_off[r] - c_off[c], xs, ys, count
+                        )
                         gap = max(abs(hi), abs(low))
                     else:
-                        gap = (abs(o_cl[r] - c_cl[c]) * bx + abs(o_cr[r] - c_cr[c]) * by
-                               + abs(o_off[r] - c_off[c]))
+                        gap = (
+                            abs(o_cl[r] - c_cl[c]) * bx
+                            + abs(o_cr[r] - c_cr[c]) * by
+                            + abs(o_off[r] - c_off[c])
+                        )
                     if gap <= tol:
                         into = r
                         break
                 if into >= 0:
                     if count > 0:
-                        hi_r, low_r = _extremes(o_cl[into], o_cr[into], o_off[into], xs, ys,
-                                                count)
+                        hi_r, low_r = _extremes(o_cl[into], o_cr[into], o_off[into], xs, ys, count)
                         hi_c, low_c = _extremes(c_cl[c], c_cr[c], c_off[c], xs, ys, count)
                         if (hi_c > hi_r) if sign > 0.0 else (low_c < low_r):
                             o_cl[into], o_cr[into], o_off[into] = c_cl[c], c_cr[c], c_off[c]
@@ -745,8 +838,16 @@ def envelope_rows(seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, pcl,
                 o_lo[out] = bound if sign < 0.0 else -np.inf
                 o_up[out] = bound if sign > 0.0 else np.inf
                 out += 1
-    return (o_seg[:out], o_pt[:out], o_joint[:out], o_cl[:out], o_cr[:out], o_off[:out],
-            o_lo[:out], o_up[:out])
+    return (
+        o_seg[:out],
+        o_pt[:out],
+        o_joint[:out],
+        o_cl[:out],
+        o_cr[:out],
+        o_off[:out],
+        o_lo[:out],
+        o_up[:out],
+    )
 
 
 @_jit()

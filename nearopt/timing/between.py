@@ -29,8 +29,14 @@ if TYPE_CHECKING:
     from ..robot import Robot
     from .problem import TimingProblem
 
-__all__ = ["BetweenSamples", "uniform_slow_down", "tighten", "inherit_margins", "speed_envelope",
-           "speed_lines"]
+__all__ = [
+    "BetweenSamples",
+    "uniform_slow_down",
+    "tighten",
+    "inherit_margins",
+    "speed_envelope",
+    "speed_lines",
+]
 
 
 class BetweenSamples:
@@ -58,8 +64,9 @@ class BetweenSamples:
     √σ).
     """
 
-    def __init__(self, robot: Robot, path: Path, problem: TimingProblem,
-                 points: int = BETWEEN_POINTS) -> None:
+    def __init__(
+        self, robot: Robot, path: Path, problem: TimingProblem, points: int = BETWEEN_POINTS
+    ) -> None:
         self.ds = np.diff(problem.sigma)
         inside = problem.interior
         if inside is None or inside.points != points:  # the problem's own points, if it has them
@@ -68,7 +75,12 @@ class BetweenSamples:
             theta, dtheta = path(s, 0), path(s, 1) * path.s_end
             ddtheta = path(s, 2) * path.s_end**2
             inside = InteriorSamples(
-                points, seg, where, sigma, theta, dtheta,
+                points,
+                seg,
+                where,
+                sigma,
+                theta,
+                dtheta,
                 robot.path_coefficients(theta, dtheta, ddtheta),
                 acceleration_coefficients(dtheta, ddtheta),
             )
@@ -117,9 +129,11 @@ class BetweenSamples:
             knots = quantity.coef
             parts = [
                 (k.g, k.m * a + k.c * bb, k.d * np.sqrt(bb))
-                for k, a, bb in ((_rows(knots, slice(0, -1)), acc, b[:-1, None]),
-                                 (coef, acc_pts, b_pts),
-                                 (_rows(knots, slice(1, None)), acc, b[1:, None]))
+                for k, a, bb in (
+                    (_rows(knots, slice(0, -1)), acc, b[:-1, None]),
+                    (coef, acc_pts, b_pts),
+                    (_rows(knots, slice(1, None)), acc, b[1:, None]),
+                )
             ]
             along = [self._along(*(part[t] for part in parts)) for t in range(3)]
             out.append((along, [part[inner:] for part in parts[1]]))
@@ -130,14 +144,16 @@ class BetweenSamples:
         imposed at the samples in every segment for αb, per joint, shape (N, n) [its unit]."""
         out = []
         root = np.sqrt(alpha)
-        for quantity, (along, near) in zip(self.problem.quantities, self._terms(b),
-                                           strict=True):
+        for quantity, (along, near) in zip(self.problem.quantities, self._terms(b), strict=True):
             lower, upper = safe_limits(quantity)
             hi, lo = self._envelope(along[0] + alpha * along[1] + root * along[2])
             worst = np.max(np.maximum(hi - upper, lower - lo), axis=1)
             value = near[0] + alpha * near[1] + root * near[2]
-            np.maximum.at(worst, self.seg[self.problem.segments * self.points:],
-                          np.maximum(value - upper, lower - value))
+            np.maximum.at(
+                worst,
+                self.seg[self.problem.segments * self.points :],
+                np.maximum(value - upper, lower - value),
+            )
             out.append(worst)
         return out
 
@@ -156,8 +172,7 @@ class BetweenSamples:
         """The largest α ∈ [0, 1] with every quantity of αb within its limits (see
         :meth:`scale_into_limits`; the same bound as :meth:`excess`)."""
         alpha = 1.0
-        for quantity, (terms, near) in zip(self.problem.quantities, self._terms(b),
-                                           strict=True):
+        for quantity, (terms, near) in zip(self.problem.quantities, self._terms(b), strict=True):
             lower, upper = safe_limits(quantity)
             hi, lo = self._envelope(terms[0] + terms[1] + terms[2])  # at α = 1
             damped = bool(np.any(terms[2] != 0.0))
@@ -169,11 +184,11 @@ class BetweenSamples:
                 if np.any(over):
                     g, w, d = _envelope_sums(terms, over)
                     joint = np.nonzero(over)[2]
-                    alpha = min(alpha, _first_crossing(sign * w, sign * d,
-                                                       sign * (g - limit[joint])))
+                    alpha = min(
+                        alpha, _first_crossing(sign * w, sign * d, sign * (g - limit[joint]))
+                    )
                 g, w, d = (x[:, finite] for x in near)
-                alpha = min(alpha, _first_crossing(sign * w, sign * d,
-                                                   sign * (g - limit[finite])))
+                alpha = min(alpha, _first_crossing(sign * w, sign * d, sign * (g - limit[finite])))
         return alpha
 
     def _speed_squared(self, b: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -182,8 +197,9 @@ class BetweenSamples:
         (a quadratic in the interval's coordinate, its maximum in closed form)."""
         if self._slope_lines is None:
             p = self.problem
-            self._slope_lines = speed_envelope(self._along(p.dtheta[:-1], self.dtheta,
-                                                           p.dtheta[1:]))
+            self._slope_lines = speed_envelope(
+                self._along(p.dtheta[:-1], self.dtheta, p.dtheta[1:])
+            )
         g0, g1 = self._slope_lines
         frac = np.arange(self.points + 2) / (self.points + 1)
         b_pts = b[:-1, None] + frac[None, :] * (b[1:] - b[:-1])[:, None]
@@ -259,8 +275,9 @@ def speed_lines(
             slope = -dg / g_at**2  # d(1/Ĝ)/dt there
             ends = (1.0 / g_at - at * slope, 1.0 / g_at + (1.0 - at) * slope)
             # how much of 1/Ĝ each end keeps (1 where Ĝ = 0 there: no bound needed)
-            ratio = np.minimum(np.where(g0 > 0.0, ends[0] * g0, 1.0),
-                               np.where(g1 > 0.0, ends[1] * g1, 1.0))
+            ratio = np.minimum(
+                np.where(g0 > 0.0, ends[0] * g0, 1.0), np.where(g1 > 0.0, ends[1] * g1, 1.0)
+            )
             better = (g_at > 0.0) & (ratio > best_ratio)
             best = tuple(np.where(better, e, old) for e, old in zip(ends, best, strict=True))
             best_ratio = np.where(better, ratio, best_ratio)
@@ -268,7 +285,9 @@ def speed_lines(
 
 
 def _largest_product(
-    x0: NDArray[np.float64], dx: NDArray[np.float64], g0: NDArray[np.float64],
+    x0: NDArray[np.float64],
+    dx: NDArray[np.float64],
+    g0: NDArray[np.float64],
     dg: NDArray[np.float64],
 ) -> NDArray[np.float64]:
     """max over t ∈ [0, 1] of (x0 + dx t)(g0 + dg t), elementwise."""
@@ -295,8 +314,13 @@ def _envelope_sums(
     for v in terms:
         curvature = _curvature(v)
         change = curvature[seg, j + 1, joint] - curvature[seg, j, joint]
-        sums = [v[seg, j + i, joint] + s * curvature[seg, j + at, joint] / 8.0 + t * change / 8.0
-                for i in (0, 1) for at in (0, 1) for s in (1.0, -1.0) for t in (1.0, -1.0)]
+        sums = [
+            v[seg, j + i, joint] + s * curvature[seg, j + at, joint] / 8.0 + t * change / 8.0
+            for i in (0, 1)
+            for at in (0, 1)
+            for s in (1.0, -1.0)
+            for t in (1.0, -1.0)
+        ]
         out.append(np.stack(sums))
     return out[0], out[1], out[2]
 
@@ -381,7 +405,7 @@ def inherit_margins(problem: TimingProblem, other: TimingProblem) -> TimingProbl
         lower, upper = safe_limits(quantity)
         room = np.minimum(upper - g, g - lower)
         inherited.append(quantity._replace(margin=np.minimum(source.margin, 0.9 * room)))
-    inherited += list(problem.quantities[len(inherited):])
+    inherited += list(problem.quantities[len(inherited) :])
     return replace(
         problem,
         torque=inherited[0],

@@ -127,8 +127,10 @@ def solve_conic(
     # as the kernel does: rows whose coefficients are ∝ 1/Δσ would otherwise set Clarabel's
     # feasibility tolerance far above the limits' own scale
     mat = rows.matrix.tocoo()
-    row_scale = np.maximum(np.where(np.isfinite(rows.upper), np.abs(rows.upper), 0.0),
-                           np.where(np.isfinite(rows.lower), np.abs(rows.lower), 0.0))
+    row_scale = np.maximum(
+        np.where(np.isfinite(rows.upper), np.abs(rows.upper), 0.0),
+        np.where(np.isfinite(rows.lower), np.abs(rows.lower), 0.0),
+    )
     if mat.nnz:
         largest = np.zeros(row_scale.size)
         np.maximum.at(largest, mat.row, np.abs(mat.data))
@@ -139,8 +141,11 @@ def solve_conic(
         finite = np.isfinite(side)
         index = np.cumsum(finite) - 1  # row of each finite side among them
         keep = finite[mat.row]
-        put(count + index[mat.row[keep]], mat.col[keep],
-            sign * mat.data[keep] / row_scale[mat.row[keep]])
+        put(
+            count + index[mat.row[keep]],
+            mat.col[keep],
+            sign * mat.data[keep] / row_scale[mat.row[keep]],
+        )
         rhs.append(side[finite] / row_scale[finite])
         count += int(finite.sum())
     put(count + np.arange(nz), iz + np.arange(nz), -np.ones(nz))
@@ -205,8 +210,9 @@ def solve_conic(
             joint, r = np.divmod(tt.row, 2 * big_n)
             k_of = np.where(r < big_n, r, r - big_n)
             slot = np.where(r < big_n, joint, n + joint)
-            put(width * k_of + 1 + slot, tt.col,
-                -2.0 * np.sqrt(ds[k_of] * weights[joint]) * tt.data)
+            put(
+                width * k_of + 1 + slot, tt.col, -2.0 * np.sqrt(ds[k_of] * weights[joint]) * tt.data
+            )
             e_rhs[k_all, 1 + slot_all] = scale_all * torque[1]
         rhs.append(e_rhs.ravel())
         cones += [clarabel.SecondOrderConeT(width)] * big_n

@@ -143,10 +143,17 @@ class Discretisation:
         self.blocks = RowBlocks(
             *(slice(int(a), int(b)) for a, b in zip(ends[:-1], ends[1:], strict=True))
         )
-        (self.left, self.coef_left, self.coef_right, self.sqrt_coef, self.offset, self.lower,
-         self.upper, self.joint, self.location) = (
-            np.concatenate([s[k] for s in stacks]) for k in range(9)
-        )
+        (
+            self.left,
+            self.coef_left,
+            self.coef_right,
+            self.sqrt_coef,
+            self.offset,
+            self.lower,
+            self.upper,
+            self.joint,
+            self.location,
+        ) = (np.concatenate([s[k] for s in stacks]) for k in range(9))
         self.sqrt_node = np.zeros(self.offset.size, dtype=int)
         torque_rows = self.blocks.torque
         self.sqrt_node[torque_rows] = self.node[self.location[torque_rows]]
@@ -161,8 +168,10 @@ class Discretisation:
         """A, the coefficients of b at every knot, sparse (R, N+1)."""
         rows = np.arange(self.left.size)
         return sp.coo_matrix(
-            (np.concatenate([self.coef_left, self.coef_right]),
-             (np.concatenate([rows, rows]), np.concatenate([self.left, self.left + 1]))),
+            (
+                np.concatenate([self.coef_left, self.coef_right]),
+                (np.concatenate([rows, rows]), np.concatenate([self.left, self.left + 1])),
+            ),
             shape=(self.left.size, self.problem.segments + 1),
         ).tocsr()
 
@@ -197,9 +206,7 @@ class Discretisation:
                 k = self.problem.interior_speed.segment[self.location[inside]]
                 ends = np.concatenate([[0.0], cap, [0.0]])  # b_0 = b_N = 0
                 keep &= bound < np.maximum(ends[k], ends[k + 1])
-        self.solver_index = np.concatenate(
-            [np.arange(self.blocks.speed.start), inside[keep]]
-        )
+        self.solver_index = np.concatenate([np.arange(self.blocks.speed.start), inside[keep]])
 
     def _add_inside(self) -> None:
         """Append the rows between the samples (the ``*_between`` blocks) that the samples
@@ -216,13 +223,22 @@ class Discretisation:
             sample_rows = sample_rows[self.sqrt_coef[sample_rows] == 0.0]
             sample_rows = sample_rows[np.argsort(self.left[sample_rows], kind="stable")]
             seg_rows = np.searchsorted(self.left[sample_rows], np.arange(p.segments + 1))
-            polygon = (seg_rows, self.coef_left[sample_rows], self.coef_right[sample_rows],
-                       self.offset[sample_rows], self.lower[sample_rows],
-                       self.upper[sample_rows], np.concatenate([[0.0], self.z_cap, [0.0]]))
+            polygon = (
+                seg_rows,
+                self.coef_left[sample_rows],
+                self.coef_right[sample_rows],
+                self.offset[sample_rows],
+                self.lower[sample_rows],
+                self.upper[sample_rows],
+                np.concatenate([[0.0], self.z_cap, [0.0]]),
+            )
             blocks = [
                 lambda: self._between(p.torque, inside.torque, polygon),
-                lambda: ([] if p.acceleration is None
-                         else self._between(p.acceleration, inside.acceleration, polygon)),
+                lambda: (
+                    []
+                    if p.acceleration is None
+                    else self._between(p.acceleration, inside.acceleration, polygon)
+                ),
                 lambda: speed,
             ]
             for block in blocks:
@@ -238,15 +254,27 @@ class Discretisation:
         )
         self.solver_index = np.concatenate([self.solver_index, np.arange(end, self.offset.size)])
 
-    _FIELDS = ("left", "coef_left", "coef_right", "sqrt_coef", "sqrt_node", "offset", "lower",
-               "upper", "joint", "location", "position")
+    _FIELDS = (
+        "left",
+        "coef_left",
+        "coef_right",
+        "sqrt_coef",
+        "sqrt_node",
+        "offset",
+        "lower",
+        "upper",
+        "joint",
+        "location",
+        "position",
+    )
 
     def _append(self, rows: tuple) -> None:
         for name, new in zip(self._FIELDS, rows, strict=True):
             setattr(self, name, np.concatenate([getattr(self, name), new]))
 
-    def _between(self, quantity: PathQuantity, coef: PathCoefficients,
-                 polygon: tuple) -> list[tuple]:
+    def _between(
+        self, quantity: PathQuantity, coef: PathCoefficients, polygon: tuple
+    ) -> list[tuple]:
         """A quantity's rows between the samples: the envelope rows of :func:`envelope_rows`
         on the evenly spaced points if it is undamped, else its value at those points (the
         damping's √b at the nearer knot); its value at the points next to the rest ends."""
@@ -272,11 +300,32 @@ class Discretisation:
             pcl = c * (1.0 - w) - m / two_ds
             pcr = c * w + m / two_ds
             seg, point, joint, cl, cr, off, lo, up = envelope_rows(
-                *polygon, np.ascontiguousarray(pcl), np.ascontiguousarray(pcr),
-                np.ascontiguousarray(g), lower[limited], upper[limited], 1e-9, TOUCH, MERGE)
+                *polygon,
+                np.ascontiguousarray(pcl),
+                np.ascontiguousarray(pcr),
+                np.ascontiguousarray(g),
+                lower[limited],
+                upper[limited],
+                1e-9,
+                TOUCH,
+                MERGE,
+            )
             zero = np.zeros(seg.size)
-            out.append((seg, cl, cr, zero, seg.copy(), off, lo, up, limited[joint], seg.copy(),
-                        w.ravel()[point]))
+            out.append(
+                (
+                    seg,
+                    cl,
+                    cr,
+                    zero,
+                    seg.copy(),
+                    off,
+                    lo,
+                    up,
+                    limited[joint],
+                    seg.copy(),
+                    w.ravel()[point],
+                )
+            )
             chosen = np.arange(even, inside.segment.size)  # the points next to the rest ends
         else:
             chosen = np.arange(inside.segment.size)
@@ -285,14 +334,21 @@ class Discretisation:
         rows = tuple(x[order] for x in rows)
         left, cl, cr, sd, sn, off, lo, up = rows[:8]
         need_up, need_lo = needed_inside(
-            *polygon, np.searchsorted(left, np.arange(big_n + 1)), cl, cr, off, sd,
-            (sn == left + 1).astype(float), lo, up, 1e-9,
+            *polygon,
+            np.searchsorted(left, np.arange(big_n + 1)),
+            cl,
+            cr,
+            off,
+            sd,
+            (sn == left + 1).astype(float),
+            lo,
+            up,
+            1e-9,
         )
         need_up &= np.isfinite(up)
         need_lo &= np.isfinite(lo)
         keep = need_up | need_lo
-        rows = (*rows[:6], np.where(need_lo, lo, -np.inf), np.where(need_up, up, np.inf),
-                *rows[8:])
+        rows = (*rows[:6], np.where(need_lo, lo, -np.inf), np.where(need_up, up, np.inf), *rows[8:])
         out.append(tuple(x[keep] for x in rows))
         return out
 
@@ -310,13 +366,16 @@ class Discretisation:
         if limited.size == 0:
             return []
         big_n, points = p.segments, inside.points
-        starts, ends = speed_lines(*speed_envelope(
-            self._along(p.dtheta, inside.dtheta[: big_n * points], limited)))
+        starts, ends = speed_lines(
+            *speed_envelope(self._along(p.dtheta, inside.dtheta[: big_n * points], limited))
+        )
         v2 = p.velocity[limited] ** 2 * (1.0 - 2.0 * SPEED_SAFETY)
         # every point's bound: the smallest over the joints and the two intervals meeting there
         pad = np.full((big_n, 1, limited.size), np.inf)
-        both = np.concatenate([np.concatenate([v2 * starts, pad], axis=1),
-                               np.concatenate([pad, v2 * ends], axis=1)], axis=2)
+        both = np.concatenate(
+            [np.concatenate([v2 * starts, pad], axis=1), np.concatenate([pad, v2 * ends], axis=1)],
+            axis=2,
+        )
         pick = np.argmin(both, axis=2)  # (N, P + 2)
         bound = np.take_along_axis(both, pick[:, :, None], axis=2)[:, :, 0]
         joint = pick % limited.size
@@ -332,21 +391,40 @@ class Discretisation:
         limit = v2[joint[:, 1:-1][keep]]
         scale = limit / inner[keep]
         count = seg.size
-        return [(seg, (1.0 - w[point]) * scale, w[point] * scale, np.zeros(count), seg.copy(),
-                 np.zeros(count), np.full(count, -np.inf), limit,
-                 limited[joint[:, 1:-1][keep]], seg.copy(), w[point])]
+        return [
+            (
+                seg,
+                (1.0 - w[point]) * scale,
+                w[point] * scale,
+                np.zeros(count),
+                seg.copy(),
+                np.zeros(count),
+                np.full(count, -np.inf),
+                limit,
+                limited[joint[:, 1:-1][keep]],
+                seg.copy(),
+                w[point],
+            )
+        ]
 
-    def _along(self, at_knots: NDArray[np.float64], inside: NDArray[np.float64],
-               joints: NDArray[np.int64]) -> NDArray[np.float64]:
+    def _along(
+        self, at_knots: NDArray[np.float64], inside: NDArray[np.float64], joints: NDArray[np.int64]
+    ) -> NDArray[np.float64]:
         """Values at the start, the evenly spaced points and the end of every segment, for the
         given joints, (N, P + 2, J)."""
         big_n = self.problem.segments
         inner = inside[:, joints].reshape(big_n, -1, joints.size)
-        return np.concatenate([at_knots[:-1, None][:, :, joints], inner,
-                               at_knots[1:, None][:, :, joints]], axis=1)
+        return np.concatenate(
+            [at_knots[:-1, None][:, :, joints], inner, at_knots[1:, None][:, :, joints]], axis=1
+        )
 
-    def _inside(self, quantity: PathQuantity, coef: PathCoefficients,
-                limited: NDArray[np.int64], chosen: NDArray[np.int64]) -> tuple:
+    def _inside(
+        self,
+        quantity: PathQuantity,
+        coef: PathCoefficients,
+        limited: NDArray[np.int64],
+        chosen: NDArray[np.int64],
+    ) -> tuple:
         """A quantity's rows at the interior points ``chosen``, for the joints ``limited``:
         the fields of :attr:`_FIELDS` (location: the segment; position: the point's w)."""
         p = self.problem
@@ -405,8 +483,11 @@ class Discretisation:
         )
 
     def _speed_rows(
-        self, left: NDArray[np.int64], weights: tuple[NDArray[np.float64], NDArray[np.float64]],
-        dtheta: NDArray[np.float64], keep: NDArray[np.bool_],
+        self,
+        left: NDArray[np.int64],
+        weights: tuple[NDArray[np.float64], NDArray[np.float64]],
+        dtheta: NDArray[np.float64],
+        keep: NDArray[np.bool_],
     ) -> tuple | None:
         """Rows (w_l b_left + w_r b_{left+1}) θ'_i² ≤ v_i² at points with slopes ``dtheta`` (P, n),
         for every joint with a limit (also where θ'_i = 0: the rows are the same for every
@@ -420,8 +501,17 @@ class Discretisation:
         slope2 = dtheta[point, joint] ** 2
         upper = v[joint] ** 2 * (1.0 - 2.0 * SPEED_SAFETY)
         zero = np.zeros(count)
-        return (left[point], weights[0][point] * slope2, weights[1][point] * slope2, zero,
-                zero.copy(), np.full(count, -np.inf), upper, joint, point)
+        return (
+            left[point],
+            weights[0][point] * slope2,
+            weights[1][point] * slope2,
+            zero,
+            zero.copy(),
+            np.full(count, -np.inf),
+            upper,
+            joint,
+            point,
+        )
 
     def _speed_at_knots(self) -> tuple | None:
         p = self.problem
@@ -437,8 +527,9 @@ class Discretisation:
         if inside is None:
             return None
         keep = np.ones(inside.dtheta.shape, dtype=bool)
-        return self._speed_rows(inside.segment, (1.0 - inside.weight, inside.weight),
-                                inside.dtheta, keep)
+        return self._speed_rows(
+            inside.segment, (1.0 - inside.weight, inside.weight), inside.dtheta, keep
+        )
 
     # ---------------------------------------------------------------- evaluating
     def b(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -448,8 +539,12 @@ class Discretisation:
     def values(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """Every row's value A b + d √b + offset, shape (R,)."""
         b = self.b(z)
-        return (self.coef_left * b[self.left] + self.coef_right * b[self.left + 1]
-                + self.sqrt_coef * np.sqrt(b)[self.sqrt_node] + self.offset)
+        return (
+            self.coef_left * b[self.left]
+            + self.coef_right * b[self.left + 1]
+            + self.sqrt_coef * np.sqrt(b)[self.sqrt_node]
+            + self.offset
+        )
 
     def excess(self, z: NDArray[np.float64]) -> float:
         """The largest violation of any row (≤ 0 when z is feasible), in the rows' units."""
@@ -475,11 +570,14 @@ class Discretisation:
         lam = np.sqrt(b)
         dt = segment_times(p.sigma, b)
         rows = self.blocks.torque
-        u = (self.coef_left[rows] * b[self.left[rows]] + self.coef_right[rows]
-             * b[self.left[rows] + 1] + self.sqrt_coef[rows] * lam[self.sqrt_node[rows]]
-             + self.offset[rows]).reshape(p.dof, 2 * p.segments)
+        u = (
+            self.coef_left[rows] * b[self.left[rows]]
+            + self.coef_right[rows] * b[self.left[rows] + 1]
+            + self.sqrt_coef[rows] * lam[self.sqrt_node[rows]]
+            + self.offset[rows]
+        ).reshape(p.dof, 2 * p.segments)
         energy = weights @ u**2  # Σ_i w_i u_i² at every sample
-        return float(np.sum(dt * (1.0 + 0.5 * (energy[: p.segments] + energy[p.segments:]))))
+        return float(np.sum(dt * (1.0 + 0.5 * (energy[: p.segments] + energy[p.segments :]))))
 
     def linear_rows(self, z_lin: NDArray[np.float64] | None) -> LinearRows:
         """The rows as ``lower ≤ M z ≤ upper``, the damping d√b replaced by its tangent at

@@ -142,8 +142,9 @@ def optimal_timing(
             raise out_of_time(problem, time_limit) from None
         raise
     # back from σ = s / s_e to the path's own s: b_s = s_e² b_σ
-    traj = Trajectory(path, problem.sigma * path.s_end, b * path.s_end**2,
-                      robot.inverse_dynamics_batch)
+    traj = Trajectory(
+        path, problem.sigma * path.s_end, b * path.s_end**2, robot.inverse_dynamics_batch
+    )
     return TimingResult(
         trajectory=traj,
         cost=cost,
@@ -171,13 +172,19 @@ def _solve_exactly(
 
     Returns the problem last solved (margins tightened), its solution and the b returned.
     """
+
     def left() -> float:
         if time.perf_counter() >= deadline:
             raise out_of_time(problem, 0.0)
         return deadline - time.perf_counter()
 
-    sol = solve_timing(problem, cost, tolerance=tolerance, guess=guess,  # gravity at the knots
-                       time_limit=left())
+    sol = solve_timing(
+        problem,
+        cost,
+        tolerance=tolerance,
+        guess=guess,  # gravity at the knots
+        time_limit=left(),
+    )
     between = BetweenSamples(robot, path, problem)  # and between them
     for _ in range(4):
         # where the motion leaves a limit between samples: a uniform slow-down by α if that

@@ -103,8 +103,12 @@ class _Rows(NamedTuple):
     const: NDArray[np.float64]  # (sign · offset − bound) / scale
 
     def values(self, b: NDArray[np.float64], lam: NDArray[np.float64]) -> NDArray[np.float64]:
-        return (self.coef_left * b[self.left] + self.coef_right * b[self.left + 1]
-                + self.sqrt_coef * lam[self.sqrt_node] + self.const)
+        return (
+            self.coef_left * b[self.left]
+            + self.coef_right * b[self.left + 1]
+            + self.sqrt_coef * lam[self.sqrt_node]
+            + self.const
+        )
 
 
 def _one_sided(
@@ -114,8 +118,10 @@ def _one_sided(
     (inf where none), and the sample of every row (−1 for a row not at a sample)."""
     index = disc.solver_index
     lower, upper = disc.lower[index], disc.upper[index]
-    scale = np.maximum(np.where(np.isfinite(lower), np.abs(lower), 0.0),
-                       np.where(np.isfinite(upper), np.abs(upper), 0.0))
+    scale = np.maximum(
+        np.where(np.isfinite(lower), np.abs(lower), 0.0),
+        np.where(np.isfinite(upper), np.abs(upper), 0.0),
+    )
     scale = np.where(scale > 0.0, scale, 1.0)
     at_sample = index < disc.blocks.acceleration.stop  # torque and acceleration rows
     sample = np.where(at_sample, disc.location[index], -1)
@@ -124,20 +130,38 @@ def _one_sided(
         keep = np.isfinite(bound)
         k = index[keep]
         factor = sign / scale[keep]
-        parts.append((disc.left[k], factor * disc.coef_left[k], factor * disc.coef_right[k],
-                      factor * disc.sqrt_coef[k], disc.sqrt_node[k],
-                      factor * disc.offset[k] - sign * bound[keep] / scale[keep], sample[keep]))
+        parts.append(
+            (
+                disc.left[k],
+                factor * disc.coef_left[k],
+                factor * disc.coef_right[k],
+                factor * disc.sqrt_coef[k],
+                disc.sqrt_node[k],
+                factor * disc.offset[k] - sign * bound[keep] / scale[keep],
+                sample[keep],
+            )
+        )
     cap = disc.z_cap
     finite = np.flatnonzero(np.isfinite(cap))
     one = np.ones(finite.size)
-    parts.append((finite + 1, 1.0 / cap[finite], 0.0 * one, 0.0 * one, finite + 1, -one,
-                  np.full(finite.size, -1)))
+    parts.append(
+        (
+            finite + 1,
+            1.0 / cap[finite],
+            0.0 * one,
+            0.0 * one,
+            finite + 1,
+            -one,
+            np.full(finite.size, -1),
+        )
+    )
     rows = _Rows(*(np.concatenate([part[k] for part in parts]) for k in range(6)))
     return rows, cap, np.concatenate([part[6] for part in parts])
 
 
-def _without_implied(disc: Discretisation, rows: _Rows, cap: NDArray[np.float64],
-                     sample: NDArray[np.int64]) -> _Rows:
+def _without_implied(
+    disc: Discretisation, rows: _Rows, cap: NDArray[np.float64], sample: NDArray[np.int64]
+) -> _Rows:
     """``rows`` less those that another row at the same sample implies, plus each sample's bound
     on b (its maximum velocity curve, which the rows left out may have helped to set)."""
     from ._kernels import redundant_rows
@@ -149,9 +173,18 @@ def _without_implied(disc: Discretisation, rows: _Rows, cap: NDArray[np.float64]
     starts = np.concatenate([[0], np.flatnonzero(np.diff(sample[order])) + 1, [order.size]])
     node = disc.node[sample]
     cap_b = np.concatenate([[0.0], cap, [0.0]])
-    drop, b_max = redundant_rows(order, starts, rows.left, rows.coef_left, rows.coef_right,
-                                 rows.sqrt_coef, np.ascontiguousarray(node, dtype=np.int64),
-                                 rows.const, disc.ds, cap_b)
+    drop, b_max = redundant_rows(
+        order,
+        starts,
+        rows.left,
+        rows.coef_left,
+        rows.coef_right,
+        rows.sqrt_coef,
+        np.ascontiguousarray(node, dtype=np.int64),
+        rows.const,
+        disc.ds,
+        cap_b,
+    )
     keep = ~drop
     knot = node[order[starts[:-1]]]
     big_n = disc.problem.segments
@@ -160,8 +193,9 @@ def _without_implied(disc: Discretisation, rows: _Rows, cap: NDArray[np.float64]
     knot, b_max = knot[bounded], b_max[bounded]
     one = np.ones(knot.size)
     extra = (knot, 1.0 / b_max, 0.0 * one, 0.0 * one, knot, -one)
-    return _Rows(*(np.concatenate([field[keep], add]) for field, add in zip(rows, extra,
-                                                                            strict=True)))
+    return _Rows(
+        *(np.concatenate([field[keep], add]) for field, add in zip(rows, extra, strict=True))
+    )
 
 
 def _start_scale(rows: _Rows, shape_b: NDArray[np.float64]) -> float:
@@ -246,9 +280,12 @@ def solve_interior(
     shape_b = np.concatenate([[0.0], shape, [0.0]])
     alpha = _start_scale(rows, shape_b)
     if not np.isfinite(alpha):
-        return InteriorSolution(np.zeros(big_n - 1), False, 0,
-                                "no limit bounds this path's speed: the time-optimal motion is "
-                                "instantaneous")
+        return InteriorSolution(
+            np.zeros(big_n - 1),
+            False,
+            0,
+            "no limit bounds this path's speed: the time-optimal motion is instantaneous",
+        )
     if alpha <= 0.0:
         return InteriorSolution(np.zeros(big_n - 1), False, 0, "no strictly feasible start")
     z = 0.5 * alpha * shape
@@ -266,19 +303,37 @@ def solve_interior(
     if energy:
         e_rows = (t_left, t_cl, t_cr, t_d, t_sn, t_o, t_w)
     else:
-        e_rows = (np.zeros(0, dtype=np.int64), *(np.zeros(0) for _ in range(2)), np.zeros(0),
-                  np.zeros(0, dtype=np.int64), np.zeros(0), np.zeros(0))
+        e_rows = (
+            np.zeros(0, dtype=np.int64),
+            *(np.zeros(0) for _ in range(2)),
+            np.zeros(0),
+            np.zeros(0, dtype=np.int64),
+            np.zeros(0),
+            np.zeros(0),
+        )
     s = -rows.values(np.concatenate([[0.0], z, [0.0]]), np.sqrt(np.concatenate([[0.0], z, [0.0]])))
     if np.any(s <= 0.0):
         return InteriorSolution(z, False, 0, "the start is not strictly feasible")
     f_scale = 1.0 / disc.torque_cost(z, weights)
     y = (1.0 / m) / s  # centred, with a duality gap of the order of F (scaled to 1)
     args = (
-        np.ascontiguousarray(rows.left, dtype=np.int64), rows.coef_left, rows.coef_right,
-        rows.sqrt_coef, np.ascontiguousarray(rows.sqrt_node, dtype=np.int64), rows.const,
-        np.ascontiguousarray(e_rows[0], dtype=np.int64), e_rows[1], e_rows[2], e_rows[3],
-        np.ascontiguousarray(e_rows[4], dtype=np.int64), e_rows[5], e_rows[6],
-        ds, scale, f_scale, tolerance,
+        np.ascontiguousarray(rows.left, dtype=np.int64),
+        rows.coef_left,
+        rows.coef_right,
+        rows.sqrt_coef,
+        np.ascontiguousarray(rows.sqrt_node, dtype=np.int64),
+        rows.const,
+        np.ascontiguousarray(e_rows[0], dtype=np.int64),
+        e_rows[1],
+        e_rows[2],
+        e_rows[3],
+        np.ascontiguousarray(e_rows[4], dtype=np.int64),
+        e_rows[5],
+        e_rows[6],
+        ds,
+        scale,
+        f_scale,
+        tolerance,
     )
     iterate = _compiled()
     done = 0
@@ -294,8 +349,9 @@ def solve_interior(
             return InteriorSolution(z, False, done, "the Newton matrix is singular", rows=m)
         if status == 3:
             return InteriorSolution(z, False, done, "the iterate is not finite", rows=m)
-    return InteriorSolution(z, False, done, f"no convergence in {max_iterations} iterations",
-                            rows=m)
+    return InteriorSolution(
+        z, False, done, f"no convergence in {max_iterations} iterations", rows=m
+    )
 
 
 def load_kernel() -> None:
@@ -322,14 +378,24 @@ def load_kernel() -> None:
     segment, weight, at = interior_points(sigma)  # and its rows between the samples
     inner = np.ones((at.size, 1))
     inside = InteriorSamples(
-        4, segment, weight, at, at[:, None], inner,
+        4,
+        segment,
+        weight,
+        at,
+        at[:, None],
+        inner,
         PathCoefficients(inner, 0.0 * inner, 0.1 * inner, 0.0 * inner),
         acceleration_coefficients(inner, 0.0 * inner),
     )
     problem = TimingProblem(
-        sigma=sigma, theta=sigma[:, None], dtheta=ones, ddtheta=0.0 * ones,
+        sigma=sigma,
+        theta=sigma[:, None],
+        dtheta=ones,
+        ddtheta=0.0 * ones,
         torque=PathQuantity(coef, np.array([-1.0]), np.array([1.0])),
-        velocity=np.array([1.0]), joint_names=("rotor",), interior=inside,
+        velocity=np.array([1.0]),
+        joint_names=("rotor",),
+        interior=inside,
     )
     solve_interior(Discretisation(problem), np.array([0.1]))
 
@@ -355,8 +421,9 @@ def _shape(rows: _Rows, sigma: NDArray[np.float64]) -> NDArray[np.float64]:
     with np.errstate(divide="ignore", invalid="ignore"):
         root = np.sqrt(np.maximum(disc, 0.0))
         q = -0.5 * (bb + np.where(bb >= 0.0, root, -root))
-        t = np.where(a != 0.0, np.where(q / a > 0.0, q / a, c / q),
-                     np.where(bb > 0, -c / bb, np.inf))
+        t = np.where(
+            a != 0.0, np.where(q / a > 0.0, q / a, c / q), np.where(bb > 0, -c / bb, np.inf)
+        )
     t = np.where(np.isfinite(t) & (t > 0.0) & (disc >= 0.0), t, np.inf)
     level = np.full(big_n, np.inf)
     np.minimum.at(level, np.minimum(rows.left, big_n - 1), t * t)

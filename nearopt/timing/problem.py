@@ -244,14 +244,20 @@ def build_timing_problem(
         np.array(lim.effort_upper),
     )
     interior = InteriorSamples(
-        BETWEEN_POINTS, segment, weight, at, theta_all[count:], dtheta_all[count:],
+        BETWEEN_POINTS,
+        segment,
+        weight,
+        at,
+        theta_all[count:],
+        dtheta_all[count:],
         PathCoefficients(*(x[count:] for x in coef_all)),
         acceleration_coefficients(dtheta_all[count:], ddtheta_all[count:]),
     )
     acceleration = None
     if np.any(np.isfinite(lim.acceleration)):
         acceleration = PathQuantity(
-            acceleration_coefficients(dtheta, ddtheta), -np.array(lim.acceleration),
+            acceleration_coefficients(dtheta, ddtheta),
+            -np.array(lim.acceleration),
             np.array(lim.acceleration),
         )
     velocity = np.array(lim.velocity) if velocity_limits else np.full(robot.n, np.inf)

@@ -145,14 +145,16 @@ def solve_timing(
         if guess.shape != problem.sigma.shape:
             guess = None
     if method not in (None, TimingMethod.INTERIOR, TimingMethod.SOCP):
-        raise ConfigurationError(f"method must be a TimingMethod of a convex solver (INTERIOR or "
-                                 f"SOCP), got {method!r}")
+        raise ConfigurationError(
+            f"method must be a TimingMethod of a convex solver (INTERIOR or SOCP), got {method!r}"
+        )
     if isinstance(cost, TorqueCost):
         weights = cost.torque_weights(problem.dof)
         return _solve_builtin(disc, cost, weights, tolerance, deadline, guess, time_limit, method)
     # any other f0: a local NLP from inside the time-optimal profile
-    fastest = _solve_builtin(disc, TimeCost(), np.zeros(problem.dof), tolerance, deadline, guess,
-                             time_limit, method)
+    fastest = _solve_builtin(
+        disc, TimeCost(), np.zeros(problem.dof), tolerance, deadline, guess, time_limit, method
+    )
     return _solve_nlp(disc, cost, fastest.b[1:-1], tolerance, max_iterations, deadline)
 
 
@@ -174,8 +176,9 @@ def _solve_builtin(
     see :func:`_solve_convex`)."""
     note = ""
     if method != TimingMethod.SOCP:
-        sol = solve_interior(disc, weights, tolerance=KERNEL_TOLERANCE, deadline=deadline,
-                             guess=guess)
+        sol = solve_interior(
+            disc, weights, tolerance=KERNEL_TOLERANCE, deadline=deadline, guess=guess
+        )
         if sol.timed_out:
             raise out_of_time(disc.problem, time_limit)
         if sol.converged:
@@ -194,8 +197,9 @@ def _solve_builtin(
         note = f"; nearopt's interior-point kernel failed first ({sol.message})"
     z_guess = None if guess is None or not disc.has_damping else guess[1:-1]
     try:
-        reference = _solve_convex(disc, cost, weights, tolerance, deadline - time.perf_counter(),
-                                  z_guess)
+        reference = _solve_convex(
+            disc, cost, weights, tolerance, deadline - time.perf_counter(), z_guess
+        )
     except SolverError as exc:
         if exc.status == "MaxTime":
             raise out_of_time(disc.problem, time_limit) from None
@@ -207,7 +211,8 @@ def out_of_time(problem: TimingProblem, time_limit: float) -> SolverError:
     """The error of a stage-1 solve that ran out of its wall-time budget ``time_limit`` [s]."""
     return SolverError(
         f"stage 1 ran out of its time limit ({time_limit:.3g} s) on a grid of "
-        f"{problem.segments} segments", status="MaxTime"
+        f"{problem.segments} segments",
+        status="MaxTime",
     )
 
 
@@ -237,8 +242,15 @@ def _solve_convex(
         # Clarabel may stop short of a 1e-9 gap ("InsufficientProgress") on badly scaled paths:
         # then the same problem is solved to 10 and 100 times looser tolerances
         for tol in (tolerance, 10.0 * tolerance, 100.0 * tolerance):
-            sol = solve_conic(disc.ds, weights, rows, torque, z_upper, tolerance=tol,
-                              time_limit=deadline - time.perf_counter())
+            sol = solve_conic(
+                disc.ds,
+                weights,
+                rows,
+                torque,
+                z_upper,
+                tolerance=tol,
+                time_limit=deadline - time.perf_counter(),
+            )
             if str(sol.status) == "MaxTime":  # no use re-linearising an unfinished answer
                 raise out_of_time(disc.problem, time_limit)
             if is_solved(sol.status):
@@ -314,8 +326,9 @@ def _solve_nlp(
         )
     else:
         rows = disc.linear_rows(None)
-        constraint = LinearConstraint(sp.diags(row) @ rows.matrix, row * rows.lower,
-                                      row * rows.upper)
+        constraint = LinearConstraint(
+            sp.diags(row) @ rows.matrix, row * rows.lower, row * rows.upper
+        )
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # trust-constr warns about its own heuristics
         res = minimize(
@@ -411,9 +424,7 @@ def largest_scale(excess: Callable[[float], float]) -> float:
     return lo
 
 
-def into_limits(
-    disc: Discretisation, z: NDArray[np.float64]
-) -> tuple[NDArray[np.float64], float]:
+def into_limits(disc: Discretisation, z: NDArray[np.float64]) -> tuple[NDArray[np.float64], float]:
     """αb with the largest α ≤ 1 that puts every row within its limits, and α.
 
     Every row is monotone along αb from α = 0, where it holds (torque g inside the limits after

@@ -79,15 +79,26 @@ def _joint_panels(
     for i, ax in enumerate(axes[:, 0]):
         ax.plot(t, values[:, i], color="C0", linewidth=1.4, label=f"{symbol} (plan)")
         for k, stop in enumerate(() if stops is None else stops):
-            ax.axvline(stop, color="0.5", linestyle=":", linewidth=1,
-                       label="stop at a target" if k == 0 else "_nolegend_")
+            ax.axvline(
+                stop,
+                color="0.5",
+                linestyle=":",
+                linewidth=1,
+                label="stop at a target" if k == 0 else "_nolegend_",
+            )
         for k, limit in enumerate((limits[0][i], limits[1][i])):
             if np.isfinite(limit):
-                ax.axhline(limit, color="C3", linestyle="--", linewidth=1,
-                           label="limit" if k == 0 else "_nolegend_")
+                ax.axhline(
+                    limit,
+                    color="C3",
+                    linestyle="--",
+                    linewidth=1,
+                    label="limit" if k == 0 else "_nolegend_",
+                )
         unit = lin_unit if linear[i] else rot_unit
-        ax.set_ylabel(f"{robot.joint_names[i]}\n[{unit}]", fontsize=9, rotation=0,
-                      ha="right", va="center")
+        ax.set_ylabel(
+            f"{robot.joint_names[i]}\n[{unit}]", fontsize=9, rotation=0, ha="right", va="center"
+        )
         ax.tick_params(labelsize=8)
         ax.grid(alpha=0.3)
     axes[-1, 0].set_xlabel("t [s]")
@@ -125,7 +136,10 @@ def plot_torques(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> 
     samples = trajectory.sample(rate)
     lim = robot.limits
     return _joint_panels(
-        robot, samples.t, samples.tau, (lim.effort_lower, lim.effort_upper),
+        robot,
+        samples.t,
+        samples.tau,
+        (lim.effort_lower, lim.effort_upper),
         ("u", "N·m", "N"),
         f"{robot.name}: actuator torques and limits (te = {trajectory.duration:.4f} s)",
         _stops(trajectory),
@@ -148,7 +162,11 @@ def plot_speeds(robot: Robot, trajectory: Trajectory, rate: float = 2000.0) -> F
     samples = trajectory.sample(rate)
     v = robot.limits.velocity
     return _joint_panels(
-        robot, samples.t, samples.qd, (-v, v), ("θ̇", "rad/s", "m/s"),
+        robot,
+        samples.t,
+        samples.qd,
+        (-v, v),
+        ("θ̇", "rad/s", "m/s"),
         f"{robot.name}: joint speeds and limits (te = {trajectory.duration:.4f} s)",
         _stops(trajectory),
     )
@@ -160,14 +178,21 @@ def plot_accelerations(robot: Robot, trajectory: Trajectory, rate: float = 2000.
     samples = trajectory.sample(rate)
     a = robot.limits.acceleration
     return _joint_panels(
-        robot, samples.t, samples.qdd, (-a, a), ("θ̈", "rad/s²", "m/s²"),
+        robot,
+        samples.t,
+        samples.qdd,
+        (-a, a),
+        ("θ̈", "rad/s²", "m/s²"),
         f"{robot.name}: joint accelerations and limits (te = {trajectory.duration:.4f} s)",
         _stops(trajectory),
     )
 
 
 def plot_workspace(
-    robot: Robot, motions: dict[str, Trajectory], poses: int = 5, scene: Scene | None = None,
+    robot: Robot,
+    motions: dict[str, Trajectory],
+    poses: int = 5,
+    scene: Scene | None = None,
     targets: tuple[ToolPose, ...] = (),
 ) -> Figure:
     """The tip's path and ``poses`` link poses of each motion in the workspace (Figs. 3-5).
@@ -199,11 +224,14 @@ def plot_workspace(
     everything = np.vstack([*tips.values(), *(c for f in frames.values() for c in f)])
     plane = plane_axes(everything)
     if plane is not None:
+
         def flat(p: NDArray[np.float64]) -> NDArray[np.float64]:
             return p @ plane.T
     else:
+
         def flat(p: NDArray[np.float64]) -> NDArray[np.float64]:
             return p
+
     low, high = everything.min(axis=0), everything.max(axis=0)
     centre, half = 0.5 * (low + high), 0.55 * float(np.max(high - low))
     fig = plt.figure(figsize=(5.2 * len(motions), 5.2))
@@ -226,8 +254,9 @@ def plot_workspace(
             origin = everything.mean(axis=0)
             for name, polygon in obstacle_sections(scene, origin, plane, half):
                 ax.fill(*polygon.T, color="C1", alpha=0.45, linewidth=0)
-                ax.text(*polygon.mean(axis=0), name, fontsize=7, ha="center", color="C1",
-                        clip_on=True)
+                ax.text(
+                    *polygon.mean(axis=0), name, fontsize=7, ha="center", color="C1", clip_on=True
+                )
             ax.set_xlim(flat(centre)[0] - half, flat(centre)[0] + half)
             ax.set_ylim(flat(centre)[1] - half, flat(centre)[1] + half)
         for chain, shade, t in zip(frames[label], shades, times[label], strict=True):
@@ -326,11 +355,15 @@ def plot_history(
         ax.plot(j, [it.J for it in result.history], "-o", markersize=3, label=label)
     else:  # a task: one line per rest-to-rest segment
         for k, (seg, reached) in enumerate(zip(segments, result.segment_targets, strict=True)):
-            ax.plot([it.index for it in seg.history], [it.J for it in seg.history], "-o",
-                    markersize=3, label=f"segment {k + 1} (to {reached[-1].name})")
+            ax.plot(
+                [it.index for it in seg.history],
+                [it.J for it in seg.history],
+                "-o",
+                markersize=3,
+                label=f"segment {k + 1} (to {reached[-1].name})",
+            )
     if reference:
-        ax.plot(list(reference), list(reference.values()), "s", color="C1",
-                label=reference_label)
+        ax.plot(list(reference), list(reference.values()), "s", color="C1", label=reference_label)
     ax.set_xlabel("iteration $j$")
     ax.set_ylabel("$J^j$")
     ax.grid(alpha=0.3)
@@ -357,7 +390,8 @@ def render_figures(
     if np.any(np.isfinite(robot.limits.acceleration)):
         figures["accelerations.png"] = plot_accelerations(robot, traj)
     figures["workspace.png"] = plot_workspace(
-        robot, {"initial": result.initial_trajectory, "final": traj},
+        robot,
+        {"initial": result.initial_trajectory, "final": traj},
         scene=None if result.collisions is None else result.collisions.scene,
         targets=target_poses(result),
     )

@@ -35,8 +35,10 @@ def target_poses(result: PlanResult | TaskResult) -> tuple[ToolPose, ...]:
 
     targets = getattr(result, "targets", None)
     if targets is not None:  # a task: every target but a last one given as joint values
-        out = [t.goal if isinstance(t.goal, ToolPose) else at(q)
-               for t, q in zip(targets, result.target_configurations, strict=True)]
+        out = [
+            t.goal if isinstance(t.goal, ToolPose) else at(q)
+            for t, q in zip(targets, result.target_configurations, strict=True)
+        ]
         return tuple(out if isinstance(targets[-1].goal, ToolPose) else out[:-1])
     out = [at(q) for q in result.via]
     return (*out, result.goal) if result.goal is not None else tuple(out)

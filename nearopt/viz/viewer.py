@@ -53,8 +53,15 @@ if TYPE_CHECKING:
     from ..trajectory import Trajectory
 
 __all__ = [
-    "export_html", "show", "LiveViewer", "scene_html", "plan_html", "scene_view", "SceneView",
-    "mesh_parts", "draw_obstacles",
+    "export_html",
+    "show",
+    "LiveViewer",
+    "scene_html",
+    "plan_html",
+    "scene_view",
+    "SceneView",
+    "mesh_parts",
+    "draw_obstacles",
 ]
 
 _VIEWER_JS = Path(meshcat.__file__).parent / "viewer" / "dist" / "main.min.js"
@@ -165,8 +172,13 @@ def scene_view(robot: Robot, q: NDArray[np.float64]) -> SceneView:
     if axes is not None:  # planar: look along the normal (right × up), from the −y side
         direction = np.cross(axes[0], axes[1])
     else:
-        direction = np.array([np.cos(np.pi / 6) * np.cos(-np.pi / 5),
-                              np.cos(np.pi / 6) * np.sin(-np.pi / 5), np.sin(np.pi / 6)])
+        direction = np.array(
+            [
+                np.cos(np.pi / 6) * np.cos(-np.pi / 5),
+                np.cos(np.pi / 6) * np.sin(-np.pi / 5),
+                np.sin(np.pi / 6),
+            ]
+        )
     # the sphere of the box fills the smaller side of meshcat's 75° field of view, 15 % margin
     distance = 1.15 * radius / np.sin(np.radians(75.0 / 2))
     floor = min(0.0, float(low[2]) - 0.05 * radius)
@@ -178,7 +190,7 @@ def _floor_grid(vis: meshcat.Visualizer, view: SceneView) -> None:
     for motions wider than 4 m), replacing meshcat's own."""
     cell = 0.1 if view.radius < 2.0 else 0.5
     half = cell * np.ceil(1.5 * view.radius / cell)
-    cx, cy = (np.round(view.centre[:2] / cell) * cell)
+    cx, cy = np.round(view.centre[:2] / cell) * cell
     ticks = np.arange(-half, half + 0.5 * cell, cell)
     ends = []
     for t in ticks:
@@ -262,8 +274,9 @@ def _load_visuals(vis: meshcat.Visualizer, robot: Robot, visual: pin.GeometryMod
             for k, (vertices, faces, colour) in enumerate(
                 mesh_parts(g.meshPath, tuple(float(x) for x in g.meshScale))
             ):
-                vis[path][f"part{k}"].set_object(mg.TriangularMeshGeometry(vertices, faces),
-                                                 _material(colour))
+                vis[path][f"part{k}"].set_object(
+                    mg.TriangularMeshGeometry(vertices, faces), _material(colour)
+                )
         else:
             obj = load_primitive(g)
             if obj is None:
@@ -297,8 +310,9 @@ def draw_obstacles(vis: meshcat.Visualizer, scene: Scene, view: SceneView) -> No
             if isinstance(shape, Capsule):
                 for k, z in enumerate((-0.5 * shape.length, 0.5 * shape.length)):
                     node[f"end{k}"].set_object(mg.Sphere(shape.radius), _material(OBSTACLE_RGBA))
-                    node[f"end{k}"].set_transform(pin.SE3(np.eye(3), np.array([0, 0, z]))
-                                                  .homogeneous)
+                    node[f"end{k}"].set_transform(
+                        pin.SE3(np.eye(3), np.array([0, 0, z])).homogeneous
+                    )
         elif isinstance(shape, HalfSpace):
             n = np.asarray(shape.normal)
             side = 3.0 * view.radius
@@ -315,10 +329,12 @@ def draw_obstacles(vis: meshcat.Visualizer, scene: Scene, view: SceneView) -> No
             node["slab"].set_object(mg.Box([side, side, thickness]), _material(HALFSPACE_RGBA))
             node["slab"].set_transform(slab)
         elif isinstance(shape, Mesh):
-            for k, (vertices, faces, _) in enumerate(mesh_parts(str(shape.path),
-                                                                (shape.scale,) * 3)):
-                node[f"part{k}"].set_object(mg.TriangularMeshGeometry(vertices, faces),
-                                            _material(OBSTACLE_RGBA))
+            for k, (vertices, faces, _) in enumerate(
+                mesh_parts(str(shape.path), (shape.scale,) * 3)
+            ):
+                node[f"part{k}"].set_object(
+                    mg.TriangularMeshGeometry(vertices, faces), _material(OBSTACLE_RGBA)
+                )
         node.set_transform(pose)
 
 
@@ -364,8 +380,9 @@ def mesh_parts(
         mesh = scene.geometry[name]
         if not hasattr(mesh, "faces") or len(mesh.faces) == 0:
             continue
-        vertices = (trimesh.transform_points(mesh.vertices, transform)
-                    * np.asarray(scale)).astype(np.float32)
+        vertices = (trimesh.transform_points(mesh.vertices, transform) * np.asarray(scale)).astype(
+            np.float32
+        )
         # files repeat a vertex for every face around it: keep one per position and normal
         # direction (to about 15°), so that the browser's normals keep the sharp edges
         key = np.hstack([vertices, np.round(4.0 * mesh.vertex_normals).astype(np.float32)])
@@ -389,8 +406,12 @@ def mesh_parts(
 
 
 def scene_html(
-    robot: Robot, trajectory: Trajectory, initial: Trajectory | None = None, fps: float = 60.0,
-    scene: Scene | None = None, targets: tuple[ToolPose, ...] = (),
+    robot: Robot,
+    trajectory: Trajectory,
+    initial: Trajectory | None = None,
+    fps: float = 60.0,
+    scene: Scene | None = None,
+    targets: tuple[ToolPose, ...] = (),
 ) -> str:
     """The animated scene of a motion as a standalone HTML page (no server, no network).
 
@@ -427,8 +448,14 @@ def export_html(result: PlanResult | TaskResult, path: str | Path, fps: float = 
 
 def plan_html(result: PlanResult | TaskResult, fps: float = 60.0) -> str:
     """:func:`scene_html` of a plan, with the first path's tip trail and the obstacles."""
-    return scene_html(result.robot, result.trajectory, result.initial_trajectory, fps,
-                      _scene_of(result), target_poses(result))
+    return scene_html(
+        result.robot,
+        result.trajectory,
+        result.initial_trajectory,
+        fps,
+        _scene_of(result),
+        target_poses(result),
+    )
 
 
 def _scene_of(result: PlanResult | TaskResult) -> Scene | None:
@@ -520,8 +547,15 @@ def show(
     """
     viewer = LiveViewer()
     try:
-        _draw(viewer.visualizer, result.robot, result.trajectory, result.initial_trajectory, fps,
-              _scene_of(result), target_poses(result))
+        _draw(
+            viewer.visualizer,
+            result.robot,
+            result.trajectory,
+            result.initial_trajectory,
+            fps,
+            _scene_of(result),
+            target_poses(result),
+        )
     except BaseException:
         viewer.close()
         raise
