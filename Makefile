@@ -33,7 +33,10 @@ run: setup
 $(CHROMIUM):
 	apt-get update -qq && apt-get install -y -qq chromium >/dev/null
 
+# the style checks first (seconds), then the suite
 test: setup $(CHROMIUM)
+	$(BIN)/ruff check nearopt tests scripts
+	$(BIN)/ruff format --check nearopt tests scripts
 	$(BIN)/python -m pytest
 
 bench: setup
