@@ -139,8 +139,7 @@ def inverse_kinematics(
     model, data = robot.model, robot.model.createData()
     fid = robot.frame_id(pose.frame)
     lim = robot.limits
-    lower = np.where(np.isfinite(lim.position_lower), lim.position_lower, -np.pi)
-    upper = np.where(np.isfinite(lim.position_upper), lim.position_upper, np.pi)
+    lower, upper = lim.sampling_box()
     rng = np.random.default_rng(20261123)
     target = pose.placement()
     full = pose.quaternion is not None

@@ -19,7 +19,7 @@ joint damping, so Dθ̇ is added here, to the derivatives too.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
 
@@ -68,6 +68,11 @@ class JointLimits:
     acceleration
         Joint acceleration limits |θ̈_i| ≤ acceleration_i [rad/s² or m/s²]; inf where none (URDF
         has no acceleration limits: they are set with :meth:`Robot.with_limits`).
+    names
+        The joints' names, for messages (a :class:`Robot`'s limits carry its joints').
+
+    Every array is made read-only; they must have one shape (n,), no NaN, and each lower limit at
+    most its upper one (a :class:`~nearopt.ConfigurationError` otherwise).
     """
 
     position_lower: NDArray[np.float64]
@@ -76,6 +81,74 @@ class JointLimits:
     effort_lower: NDArray[np.float64]
     effort_upper: NDArray[np.float64]
     acceleration: NDArray[np.float64]
+    names: tuple[str, ...] = ()
+
+    _ARRAYS = (
+        "position_lower",
+        "position_upper",
+        "velocity",
+        "effort_lower",
+        "effort_upper",
+        "acceleration",
+    )
+
+    def __post_init__(self) -> None:
+        for key in self._ARRAYS:
+            object.__setattr__(self, key, _readonly(getattr(self, key)))
+        n = self.position_lower.shape
+        if len(n) != 1 or any(getattr(self, key).shape != n for key in self._ARRAYS):
+            raise ConfigurationError(
+                "joint limits must all have one shape (n,), got "
+                + ", ".join(f"{key} {getattr(self, key).shape}" for key in self._ARRAYS)
+            )
+        object.__setattr__(self, "names", tuple(self.names))
+        if self.names and len(self.names) != n[0]:
+            raise ConfigurationError(f"{len(self.names)} joint names for {n[0]} joints")
+        for key in self._ARRAYS:
+            if np.any(np.isnan(getattr(self, key))):
+                i = int(np.argmax(np.isnan(getattr(self, key))))
+                raise ConfigurationError(
+                    f"{key} of joint {self._name(i)} is NaN", joint=self._joint(i)
+                )
+        for what, lo, hi in (
+            ("position", self.position_lower, self.position_upper),
+            ("effort", self.effort_lower, self.effort_upper),
+        ):
+            if np.any(lo > hi):
+                i = int(np.argmax(lo > hi))
+                raise ConfigurationError(
+                    f"{what} limits of joint {self._name(i)}: lower {lo[i]:g} is above upper "
+                    f"{hi[i]:g}",
+                    joint=self._joint(i),
+                )
+
+    def _name(self, i: int) -> str:
+        return repr(self.names[i]) if self.names else str(i)
+
+    def _joint(self, i: int) -> str | None:
+        return self.names[i] if self.names else None
+
+    def check_within(self, q: ArrayLike, what: str = "q") -> None:
+        """Raise a :class:`~nearopt.ConfigurationError` naming the first joint of ``q`` (n,)
+        outside its position limits, its value and the limits."""
+        q = np.asarray(q, dtype=float)
+        outside = ~((self.position_lower <= q) & (q <= self.position_upper))
+        if np.any(outside):
+            i = int(np.argmax(outside))
+            raise ConfigurationError(
+                f"{what}[{i}] = {q[i]:.6g} rad is outside the position limits "
+                f"[{self.position_lower[i]:.6g}, {self.position_upper[i]:.6g}] of joint "
+                f"{self._name(i)}",
+                joint=self._joint(i),
+            )
+
+    def sampling_box(self, span: float = np.pi) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """The position limits with ±``span`` [rad] where a joint has none: a box to draw
+        configurations from."""
+        return (
+            np.where(np.isfinite(self.position_lower), self.position_lower, -span),
+            np.where(np.isfinite(self.position_upper), self.position_upper, span),
+        )
 
 
 class PathCoefficients(NamedTuple):
@@ -144,7 +217,8 @@ class Robot:
         self._pool: pin.ModelPool | None = None  # for batches of RNEA, made on first use
         self.name = name
         self.tip = tip
-        self.limits = limits
+        names = tuple(model.names)[1:]
+        self.limits = limits if limits.names == names else replace(limits, names=names)
         self.damping = _readonly(damping)
         self.urdf_xml = urdf_xml
         self.urdf_path = urdf_path

@@ -183,3 +183,32 @@ def test_continuous_joints_are_plain_angles() -> None:
     # an angle beyond 2π is a valid, distinct configuration value
     q = np.array([7.0, 2.0, 2.0, 0.0, 2.0, 0.0])
     assert robot.mass_matrix(q).shape == (6, 6)
+
+
+def test_joint_limits_validate_themselves_and_name_the_joint() -> None:
+    robot = load("ur5")
+    limits = robot.limits
+    assert limits.names == tuple(robot.joint_names)
+    assert not limits.velocity.flags.writeable
+    inf = np.full(2, np.inf)
+    with pytest.raises(nearopt.ConfigurationError, match="one shape"):
+        nearopt.robot.JointLimits(-inf, inf, inf[:1], -inf, inf, inf)
+    with pytest.raises(nearopt.ConfigurationError, match="joint 'b': lower 1 is above upper 0"):
+        nearopt.robot.JointLimits(
+            np.array([0.0, 1.0]), np.array([1.0, 0.0]), inf, -inf, inf, inf, names=("a", "b")
+        )
+    with pytest.raises(nearopt.ConfigurationError, match="velocity of joint 'a' is NaN"):
+        nearopt.robot.JointLimits(
+            -inf, inf, np.array([np.nan, 1.0]), -inf, inf, inf, names=("a", "b")
+        )
+    q = np.clip(np.zeros(robot.n), limits.position_lower, limits.position_upper)
+    limits.check_within(q)
+    q[2] = limits.position_upper[2] + 0.1
+    with pytest.raises(nearopt.ConfigurationError, match="elbow_joint") as info:
+        limits.check_within(q, "qe")
+    assert info.value.joint == "elbow_joint" and "qe[2]" in str(info.value)
+    lower, upper = nearopt.robot.JointLimits(
+        -inf, np.array([np.inf, 2.0]), inf, -inf, inf, inf
+    ).sampling_box()
+    np.testing.assert_array_equal(lower, [-np.pi, -np.pi])
+    np.testing.assert_array_equal(upper, [np.pi, 2.0])

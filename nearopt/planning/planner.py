@@ -181,8 +181,8 @@ def plan(
         qe = inverse_kinematics(robot, goal, seed=q0)
     qe = robot.check_configuration(qe, "qe")
     if position_limits:
-        _check_within(robot, q0, "q0")
-        _check_within(robot, qe, "qe")
+        robot.limits.check_within(q0, "q0")
+        robot.limits.check_within(qe, "qe")
     vias = _via_points(robot, via, q0, position_limits)
     if vias and method != Method.SCP:
         raise ConfigurationError("via-points need method 'scp' (the B-spline path)")
@@ -468,7 +468,7 @@ def _via_points(
         else:
             q = robot.check_configuration(point, f"via[{k}]")
         if position_limits:
-            _check_within(robot, q, f"via[{k}]")
+            robot.limits.check_within(q, f"via[{k}]")
         out.append(q)
         previous = q
     return out
@@ -487,9 +487,7 @@ def _clear_solution(
     if collisions.closest(qe).distance >= collisions.margin:
         return qe
     rng = np.random.default_rng(20261124)
-    lim = robot.limits
-    lower = np.where(np.isfinite(lim.position_lower), lim.position_lower, -np.pi)
-    upper = np.where(np.isfinite(lim.position_upper), lim.position_upper, np.pi)
+    lower, upper = robot.limits.sampling_box()
     for _ in range(tries):
         try:
             q = inverse_kinematics(robot, goal, seed=rng.uniform(lower, upper), attempts=3)
@@ -658,14 +656,3 @@ def _format(entry: Iteration) -> str:
         f"iteration {entry.index:3d}  J = {entry.J:.6f}  step = {alpha:>8}  "
         f"te = {entry.duration:.4f} s  {entry.wall_time:7.2f} s"
     )
-
-
-def _check_within(robot: Robot, q: NDArray[np.float64], what: str) -> None:
-    lim = robot.limits
-    for i, name in enumerate(robot.joint_names):
-        if not lim.position_lower[i] <= q[i] <= lim.position_upper[i]:
-            raise ConfigurationError(
-                f"{what}[{i}] = {q[i]:.6g} rad is outside the position limits "
-                f"[{lim.position_lower[i]:.6g}, {lim.position_upper[i]:.6g}] of joint {name!r}",
-                joint=name,
-            )
