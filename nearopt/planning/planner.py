@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -154,6 +154,77 @@ def plan(
         or no collision-free path was found within the time limit.
     """
     t_start = time.perf_counter()
+    setup = _setup(
+        robot,
+        q0,
+        qe,
+        cost,
+        method,
+        options,
+        grid,
+        max_iterations,
+        time_limit,
+        velocity_limits,
+        position_limits,
+        scene,
+        margin,
+        self_collision,
+        optimise_goal,
+        via,
+        t_start,
+    )
+    line, start, via_s = _first_path(setup)
+    initial = _time_first_path(setup, line, start)
+    timing, reason, message, evaluations, history = _improve(
+        setup, line, start, via_s, initial, callback, verbose
+    )
+    return _result(setup, timing, initial, history, reason, message, evaluations, via_s)
+
+
+@dataclass(frozen=True)
+class _Setup:
+    """:func:`plan`'s arguments, checked (and the goal configuration found): what each of its
+    phases reads."""
+
+    robot: Robot
+    q0: NDArray[np.float64]
+    qe: NDArray[np.float64]
+    goal: ToolPose | None
+    cost: Cost
+    method: Method
+    options: SCPOptions | PaperOptions
+    grid: int
+    max_iterations: int
+    velocity_limits: bool
+    position_limits: bool
+    collisions: CollisionModel | None
+    vias: list[NDArray[np.float64]]
+    optimise_goal: bool
+    t_start: float
+    deadline: float
+
+
+def _setup(
+    robot: Robot,
+    q0: ArrayLike,
+    qe: ArrayLike | ToolPose,
+    cost: Cost | None,
+    method: Method | str | None,
+    options: SCPOptions | PaperOptions | None,
+    grid: int,
+    max_iterations: int,
+    time_limit: float,
+    velocity_limits: bool,
+    position_limits: bool,
+    scene: Scene | CollisionModel | None,
+    margin: float | None,
+    self_collision: bool | None,
+    optimise_goal: bool,
+    via: Sequence[ArrayLike | ToolPose] | None,
+    t_start: float,
+) -> _Setup:
+    """Check :func:`plan`'s arguments (see there for what it raises), find the goal
+    configuration of a pose and the collision model."""
     if not isinstance(robot, Robot):
         raise ConfigurationError(
             f"robot must be a nearopt.Robot (e.g. Robot.from_name('two_link') or "
@@ -202,6 +273,34 @@ def plan(
         collisions.check_configuration(qe, "goal configuration qe")
         for k_via, q_via in enumerate(vias):
             collisions.check_configuration(q_via, f"via-point {k_via}")
+    return _Setup(
+        robot,
+        q0,
+        qe,
+        goal,
+        cost,
+        method,
+        options,
+        grid,
+        max_iterations,
+        velocity_limits,
+        position_limits,
+        collisions,
+        vias,
+        optimise_goal,
+        t_start,
+        t_start + time_limit,
+    )
+
+
+def _first_path(setup: _Setup) -> tuple[Path, Path | None, tuple[float, ...]]:
+    """The path stage 2 starts from: the straight line, the B-spline through the via-points,
+    or (where it collides) the best of a few OMPL paths. Returns it, the start given to stage 2
+    (None: the straight line) and the via-points' σ."""
+    robot, q0, qe, cost, options = setup.robot, setup.q0, setup.qe, setup.cost, setup.options
+    vias, collisions, method = setup.vias, setup.collisions, setup.method
+    position_limits, velocity_limits = setup.position_limits, setup.velocity_limits
+    max_iterations, deadline = setup.max_iterations, setup.deadline
     line: Path = StraightPath(q0, qe)
     start = None
     via_s: tuple[float, ...] = ()
@@ -221,7 +320,7 @@ def plan(
                 points,
                 options,
                 bounds,
-                min(max(0.25 * (t_start + time_limit - time.perf_counter()), 1e-3), 5.0),
+                min(max(0.25 * (deadline - time.perf_counter()), 1e-3), 5.0),
             )
             line, via_s = start, tuple(float(x) for x in sigma)
         if not vias and not collisions.path_clearance(line).certified:
@@ -235,7 +334,7 @@ def plan(
                 control_points=k,
                 breaks=breaks,
                 attempts=5,
-                time_limit=min(max(0.25 * (t_start + time_limit - time.perf_counter()), 1e-3), 5.0),
+                time_limit=min(max(0.25 * (deadline - time.perf_counter()), 1e-3), 5.0),
             )
             timed = []
             for candidate in starts:
@@ -271,8 +370,15 @@ def plan(
                     position_limits=position_limits,
                     options=options,
                     collisions=collisions,
-                    deadline=t_start + time_limit,
+                    deadline=deadline,
                 )
+    return line, start, via_s
+
+
+def _time_first_path(setup: _Setup, line: Path, start: Path | None) -> TimingResult:
+    """Stage 1 on the first path, on the plan's grid."""
+    robot, cost, grid = setup.robot, setup.cost, setup.grid
+    velocity_limits, deadline = setup.velocity_limits, setup.deadline
     try:
         initial = optimal_timing(
             robot,
@@ -280,11 +386,30 @@ def plan(
             cost,
             grid=grid,
             velocity_limits=velocity_limits,
-            time_limit=t_start + time_limit - time.perf_counter(),
+            time_limit=deadline - time.perf_counter(),
         )
     except SolverError as exc:
         what = "the straight line" if start is None else "the collision-free start"
         raise SolverError(f"no plan: timing {what} failed: {exc}", status=exc.status) from exc
+    return initial
+
+
+def _improve(
+    setup: _Setup,
+    line: Path,
+    start: Path | None,
+    via_s: tuple[float, ...],
+    initial: TimingResult,
+    callback: Callable[[Iteration], None] | None,
+    verbose: bool,
+) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+    """Stage 2 from the first path (or none, ``max_iterations = 0``): the timing returned, why
+    it stopped, the message, the stage-1 solves spent and the accepted iterates."""
+    robot, q0, qe, cost, goal = setup.robot, setup.q0, setup.qe, setup.cost, setup.goal
+    method, options, grid, collisions = setup.method, setup.options, setup.grid, setup.collisions
+    velocity_limits, position_limits = setup.velocity_limits, setup.position_limits
+    max_iterations, optimise_goal = setup.max_iterations, setup.optimise_goal
+    t_start, deadline = setup.t_start, setup.deadline
     history: list[Iteration] = []
     best: list[TimingResult] = [initial]  # the last accepted iterate's timing (the best)
 
@@ -302,7 +427,7 @@ def plan(
         position_limits=position_limits,
         options=options,
         max_iterations=max_iterations,
-        deadline=t_start + time_limit,
+        deadline=deadline,
         t_start=t_start,
         accept=accept,
     )
@@ -345,6 +470,22 @@ def plan(
                 f"; {'the straight line' if start is None else 'the first path'} is "
                 "returned: it costs less on the plan's grid"
             )
+    return timing, reason, message, evaluations, history
+
+
+def _result(
+    setup: _Setup,
+    timing: TimingResult,
+    initial: TimingResult,
+    history: list[Iteration],
+    reason: StopReason,
+    message: str,
+    evaluations: int,
+    via_s: tuple[float, ...],
+) -> PlanResult:
+    """The plan, its clearance certified when collisions are checked."""
+    robot, collisions, goal, vias = setup.robot, setup.collisions, setup.goal, setup.vias
+    method, t_start = setup.method, setup.t_start
     return PlanResult(
         robot=robot,
         timing=timing,
