@@ -27,7 +27,7 @@ if TYPE_CHECKING:
     from .robot import Robot
     from .trajectory import Motion, Trajectory
 
-__all__ = ["Check", "VerificationReport", "VerificationError", "Waypoint", "verify"]
+__all__ = ["Check", "VerificationReport", "VerificationError", "Waypoint", "Tolerances", "verify"]
 
 
 class VerificationError(NearoptError):
@@ -214,166 +214,237 @@ def verify(
     """
     if not (np.isfinite(rate) and rate > 0):
         raise ConfigurationError(f"the controller rate must be > 0 Hz, got {rate}")
-    n, names, lim = robot.n, list(robot.joint_names), robot.limits
-    samples = trajectory.sample(rate)
-    t, q, qd, qdd = samples.t, samples.q, samples.qd, samples.qdd
+    tol = Tolerances(
+        torque_tolerance,
+        limit_tolerance,
+        end_tolerance,
+        cost_tolerance,
+        simulation_tolerance,
+        window,
+    )
+    motion = _Sampled.of(trajectory, robot, rate)
+    start = motion.q[0] if q0 is None else robot.check_configuration(q0, "q0")
+    goal = motion.q[-1] if qe is None else robot.check_configuration(qe, "qe")
+    checks = _limit_checks(robot, motion, tol, velocity_limits, position_limits)
+    checks.append(_end_check(robot, motion, start, goal, tol))
+    if goal_pose is not None:
+        checks.append(_goal_pose_check(robot, motion, goal_pose, tol))
+    if waypoints:
+        _check_waypoints(checks, trajectory, robot, waypoints, end_tolerance)
+    checks.append(_rest_check(robot, motion, tol))
+    if collisions is not None and collisions.pairs:
+        checks.append(_clearance_check(collisions, motion))
+    if cost is not None and J is not None:
+        checks.append(_cost_check(robot, trajectory, cost, J, rate, tol))
+    if simulate:
+        checks += _simulation_checks(robot, trajectory, goal, tol)
+    return VerificationReport(tuple(checks), float(rate), int(motion.t.size))
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """What :func:`verify` accepts (see its parameters of the same names)."""
+
+    torque: float = 1e-6
+    limit: float = 1e-9
+    end: float = 1e-8
+    cost: float = 1e-4
+    simulation: float = 1e-5
+    window: float = 0.25
+
+
+@dataclass(frozen=True)
+class _Sampled:
+    """The motion sampled once at the controller's rate, with its torques by RNEA (+ D θ̇)."""
+
+    t: NDArray[np.float64]
+    q: NDArray[np.float64]
+    qd: NDArray[np.float64]
+    qdd: NDArray[np.float64]
+    u: NDArray[np.float64]
+
+    @classmethod
+    def of(cls, trajectory: Motion, robot: Robot, rate: float) -> _Sampled:
+        samples = trajectory.sample(rate)
+        q, qd, qdd = samples.q, samples.qd, samples.qdd
+        return cls(samples.t, q, qd, qdd, _torques(robot, q, qd, qdd))
+
+
+def _torques(robot: Robot, q: NDArray, qd: NDArray, qdd: NDArray) -> NDArray[np.float64]:
+    """u = RNEA(θ, θ̇, θ̈) + D θ̇ at every sample, from Pinocchio directly."""
     model, data = robot.model, robot.model.createData()
-    u = np.array(
+    return np.array(
         [pin.rnea(model, data, *x) + robot.damping * x[1] for x in zip(q, qd, qdd, strict=True)]
     )
-    checks = []
-    scale = np.maximum(np.abs(lim.effort_lower), np.abs(lim.effort_upper))
-    excess = _excess(u, lim.effort_lower, lim.effort_upper, scale)
-    worst = np.unravel_index(np.argmax(excess), excess.shape)
-    checks.append(
-        Check(
+
+
+def _limit_checks(
+    robot: Robot, motion: _Sampled, tol: Tolerances, velocity_limits: bool, position_limits: bool
+) -> list[Check]:
+    """Torques, and (as asked, or where the robot has them) speeds, positions, accelerations."""
+    n, names, lim = robot.n, list(robot.joint_names), robot.limits
+    t = motion.t
+    rows = [
+        (
             "torque limits (RNEA)",
-            float(excess[worst]),
-            torque_tolerance,
+            motion.u,
+            lim.effort_lower,
+            lim.effort_upper,
+            np.maximum(np.abs(lim.effort_lower), np.abs(lim.effort_upper)),
+            tol.torque,
             "relative",
-            _where(t, names, worst),
         )
-    )
+    ]
     if velocity_limits:
-        excess = _excess(qd, -lim.velocity, lim.velocity, lim.velocity)
-        worst = np.unravel_index(np.argmax(excess), excess.shape)
-        checks.append(
-            Check(
+        rows.append(
+            (
                 "joint speed limits",
-                float(excess[worst]),
-                limit_tolerance,
+                motion.qd,
+                -lim.velocity,
+                lim.velocity,
+                lim.velocity,
+                tol.limit,
                 "relative",
-                _where(t, names, worst),
             )
         )
     if position_limits:
-        excess = _excess(q, lim.position_lower, lim.position_upper, np.ones(n))
-        worst = np.unravel_index(np.argmax(excess), excess.shape)
-        checks.append(
-            Check(
+        rows.append(
+            (
                 "joint position limits",
-                float(excess[worst]),
-                limit_tolerance,
+                motion.q,
+                lim.position_lower,
+                lim.position_upper,
+                np.ones(n),
+                tol.limit,
                 "rad",
-                _where(t, names, worst),
             )
         )
     if np.any(np.isfinite(lim.acceleration)):
-        excess = _excess(qdd, -lim.acceleration, lim.acceleration, lim.acceleration)
-        worst = np.unravel_index(np.argmax(excess), excess.shape)
-        checks.append(
-            Check(
+        rows.append(
+            (
                 "joint acceleration limits",
-                float(excess[worst]),
-                limit_tolerance,
+                motion.qdd,
+                -lim.acceleration,
+                lim.acceleration,
+                lim.acceleration,
+                tol.limit,
                 "relative",
-                _where(t, names, worst),
             )
         )
-    start = q[0] if q0 is None else robot.check_configuration(q0, "q0")
-    goal = q[-1] if qe is None else robot.check_configuration(qe, "qe")
+    checks = []
+    for name, values, lower, upper, scale, tolerance, unit in rows:
+        excess = _excess(values, lower, upper, scale)
+        worst = np.unravel_index(np.argmax(excess), excess.shape)
+        checks.append(Check(name, float(excess[worst]), tolerance, unit, _where(t, names, worst)))
+    return checks
+
+
+def _end_check(
+    robot: Robot, motion: _Sampled, start: NDArray, goal: NDArray, tol: Tolerances
+) -> Check:
+    q, names = motion.q, list(robot.joint_names)
     ends = np.abs(np.vstack([q[0] - start, q[-1] - goal]))
     k, i = np.unravel_index(np.argmax(ends), ends.shape)
-    checks.append(
-        Check(
-            "end positions",
-            float(ends[k, i]),
-            end_tolerance,
-            "rad",
-            f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}",
-        )
+    return Check(
+        "end positions",
+        float(ends[k, i]),
+        tol.end,
+        "rad",
+        f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}",
     )
-    if goal_pose is not None:
-        from .kinematics import pose_error
 
-        distance, angle = pose_error(robot, q[-1], goal_pose)
-        checks.append(
-            Check(
-                "goal pose",
-                max(distance, angle),
-                end_tolerance,
-                "m or rad",
-                f"{goal_pose.frame or robot.tip!r}: {distance:.2e} m, {angle:.2e} rad "
-                "from the target at t = te",
-            )
-        )
-    if waypoints:
-        _check_waypoints(checks, trajectory, robot, waypoints, end_tolerance)
-    rest = np.abs(qd[[0, -1]])
-    k, i = np.unravel_index(np.argmax(rest), rest.shape)
-    checks.append(
-        Check(
-            "rest at both ends",
-            float(rest[k, i]),
-            end_tolerance,
-            "rad/s",
-            f"at the {'start' if k == 0 else 'goal'}, joint {names[i]!r}",
-        )
+
+def _goal_pose_check(robot: Robot, motion: _Sampled, goal_pose: ToolPose, tol: Tolerances) -> Check:
+    from .kinematics import pose_error
+
+    distance, angle = pose_error(robot, motion.q[-1], goal_pose)
+    return Check(
+        "goal pose",
+        max(distance, angle),
+        tol.end,
+        "m or rad",
+        f"{goal_pose.frame or robot.tip!r}: {distance:.2e} m, {angle:.2e} rad "
+        "from the target at t = te",
     )
-    if collisions is not None and collisions.pairs:
-        dist = np.array([collisions.distances(x) for x in q])
-        k_t, k_p = np.unravel_index(np.argmin(dist), dist.shape)
-        closest = float(dist[k_t, k_p])
-        checks.append(
-            Check(
-                "clearance (coal)",
-                collisions.margin - closest,
-                0.0,
-                "m",
-                f"{collisions.pairs[k_p]} {closest * 1e3:.2f} mm apart at t = "
-                f"{t[k_t]:.4f} s (margin {collisions.margin * 1e3:.1f} mm)",
-            )
-        )
-    if cost is not None and J is not None:
-        tf, weight = _simpson_nodes(trajectory.t, max(rate, 20000.0))
-        qf, qdf, qddf = trajectory.states(tf)
-        uf = np.array(
-            [
-                pin.rnea(model, data, *x) + robot.damping * x[1]
-                for x in zip(qf, qdf, qddf, strict=True)
-            ]
-        )
-        recomputed = float(weight @ cost(qf, qdf, uf))
-        checks.append(
-            Check(
-                "J recomputed",
-                abs(recomputed - J) / max(abs(J), 1e-12),
-                cost_tolerance,
-                "relative",
-                f"(∫ f0 dt = {recomputed:.8g}, J = {J:.8g})",
-            )
-        )
-    if not simulate:
-        return VerificationReport(tuple(checks), float(rate), int(t.size))
-    x_end, defect = _simulate(robot, trajectory, window)
-    checks.append(
+
+
+def _rest_check(robot: Robot, motion: _Sampled, tol: Tolerances) -> Check:
+    rest = np.abs(motion.qd[[0, -1]])
+    k, i = np.unravel_index(np.argmax(rest), rest.shape)
+    return Check(
+        "rest at both ends",
+        float(rest[k, i]),
+        tol.end,
+        "rad/s",
+        f"at the {'start' if k == 0 else 'goal'}, joint {robot.joint_names[i]!r}",
+    )
+
+
+def _clearance_check(collisions: CollisionModel, motion: _Sampled) -> Check:
+    dist = np.array([collisions.distances(x) for x in motion.q])
+    k_t, k_p = np.unravel_index(np.argmin(dist), dist.shape)
+    closest = float(dist[k_t, k_p])
+    return Check(
+        "clearance (coal)",
+        collisions.margin - closest,
+        0.0,
+        "m",
+        f"{collisions.pairs[k_p]} {closest * 1e3:.2f} mm apart at t = "
+        f"{motion.t[k_t]:.4f} s (margin {collisions.margin * 1e3:.1f} mm)",
+    )
+
+
+def _cost_check(
+    robot: Robot,
+    trajectory: Motion,
+    cost: Cost,
+    J: float,
+    rate: float,  # noqa: N803
+    tol: Tolerances,
+) -> Check:
+    """J recomputed by composite Simpson on at least max(rate, 20 kHz) between the knots."""
+    tf, weight = _simpson_nodes(trajectory.t, max(rate, 20000.0))
+    qf, qdf, qddf = trajectory.states(tf)
+    recomputed = float(weight @ cost(qf, qdf, _torques(robot, qf, qdf, qddf)))
+    return Check(
+        "J recomputed",
+        abs(recomputed - J) / max(abs(J), 1e-12),
+        tol.cost,
+        "relative",
+        f"(∫ f0 dt = {recomputed:.8g}, J = {J:.8g})",
+    )
+
+
+def _simulation_checks(
+    robot: Robot, trajectory: Motion, goal: NDArray, tol: Tolerances
+) -> list[Check]:
+    """Where u(t), integrated with ABA window by window, takes the arm."""
+    n = robot.n
+    x_end, defect = _simulate(robot, trajectory, tol.window)
+    what = "forward simulation of u(t) with ABA"
+    return [
         Check(
             "simulated end position",
             float(np.max(np.abs(x_end[:n] - goal))),
-            simulation_tolerance,
+            tol.simulation,
             "rad",
-            "forward simulation of u(t) with ABA",
-        )
-    )
-    checks.append(
+            what,
+        ),
         Check(
             "simulated end speed",
             float(np.max(np.abs(x_end[n:]))),
-            10 * simulation_tolerance,
+            10 * tol.simulation,
             "rad/s",
-            "forward simulation of u(t) with ABA",
-        )
-    )
-    checks.append(
+            what,
+        ),
         Check(
             "simulation window defect",
             defect,
-            10 * simulation_tolerance,
+            10 * tol.simulation,
             "rad or rad/s",
-            f"largest mismatch at the end of a {window:g} s window",
-        )
-    )
-    return VerificationReport(tuple(checks), float(rate), int(t.size))
+            f"largest mismatch at the end of a {tol.window:g} s window",
+        ),
+    ]
 
 
 def _check_waypoints(
