@@ -26,7 +26,7 @@ import time
 import warnings
 from dataclasses import fields
 from pathlib import Path
-from typing import TYPE_CHECKING, NoReturn
+from typing import TYPE_CHECKING, NoReturn, TextIO
 
 import numpy as np
 
@@ -36,7 +36,7 @@ from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .export import csv_text, json_text
 from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
 from .path import StraightPath
-from .planning import METHODS, Iteration, StopReason, TaskResult
+from .planning import METHODS, Iteration, PlanResult, StopReason, TaskResult
 from .verify import VerificationError
 
 if TYPE_CHECKING:
@@ -94,6 +94,20 @@ def _parser() -> argparse.ArgumentParser:
     sub = parser.add_subparsers(dest="command", required=True, parser_class=_Parser)
     sub.add_parser("robots", help="list the arms known by name")
     p = sub.add_parser("plan", help="plan a motion from rest at q0 to rest at qe")
+    for options in (
+        _arm_options,
+        _motion_options,
+        _planner_options,
+        _scene_options,
+        _output_options,
+    ):
+        options(p)
+    _batch_parser(sub)
+    return parser
+
+
+def _arm_options(p: argparse.ArgumentParser) -> None:
+    """Which arm, which of its joints, its limits (``nearopt plan``)."""
     which = p.add_mutually_exclusive_group(required=True)
     which.add_argument("--robot", metavar="NAME", help="a known arm (see `nearopt robots`)")
     which.add_argument("--urdf", metavar="PATH", help="a URDF file")
@@ -146,6 +160,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--velocity-scale", type=float, metavar="F", help="multiply every joint speed limit by F"
     )
+
+
+def _motion_options(p: argparse.ArgumentParser) -> None:
+    """Start, goal (joint values, a tool pose or a task), via-points."""
     p.add_argument(
         "--q0",
         nargs="+",
@@ -188,6 +206,10 @@ def _parser() -> argparse.ArgumentParser:
         "the pose with the path, to lower J)",
     )
     p.add_argument("--deg", action="store_true", help="q0 and qe are in degrees (default rad)")
+
+
+def _planner_options(p: argparse.ArgumentParser) -> None:
+    """The cost, the method, the grid, the budgets and the limits switched off."""
     cost = p.add_mutually_exclusive_group()
     cost.add_argument("--beta", type=float, help="f0 = 1 + β Σ u² (the paper's eq. 32)")
     cost.add_argument(
@@ -222,6 +244,10 @@ def _parser() -> argparse.ArgumentParser:
         "or one per joint (default: none)",
     )
     p.add_argument("--no-position-limits", action="store_true", help="ignore joint position limits")
+
+
+def _scene_options(p: argparse.ArgumentParser) -> None:
+    """Obstacles, the margin, self-collision."""
     p.add_argument(
         "--scene",
         metavar="FILE",
@@ -247,6 +273,10 @@ def _parser() -> argparse.ArgumentParser:
         action="store_false",
         help="do not check the links against each other",
     )
+
+
+def _output_options(p: argparse.ArgumentParser) -> None:
+    """What is written, shown or printed."""
     p.add_argument(
         "--json",
         metavar="FILE",
@@ -269,6 +299,10 @@ def _parser() -> argparse.ArgumentParser:
         help="play it in the browser (meshcat server on 127.0.0.1) until Ctrl+C",
     )
     p.add_argument("--quiet", action="store_true", help="no per-iteration output")
+
+
+def _batch_parser(sub: argparse._SubParsersAction) -> None:  # noqa: SLF001 - argparse's own
+    """``nearopt batch``."""
     b = sub.add_parser(
         "batch", help="plan many motions (JSON Lines) on this machine's cores or on a Dask cluster"
     )
@@ -305,7 +339,6 @@ def _parser() -> argparse.ArgumentParser:
         help="plan again the motions an earlier run recorded as failed",
     )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
-    return parser
 
 
 def parse_plan(argv: Sequence[str]) -> argparse.Namespace:
@@ -337,21 +370,7 @@ def plan_request(args: argparse.Namespace) -> PlanRequest:
 def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     request = plan_request(args)
     request.check()
-    if args.plots:
-        try:
-            import matplotlib  # noqa: F401
-        except ImportError:
-            raise ConfigurationError(
-                "--plots needs matplotlib: pip install 'nearopt[viz]'"
-            ) from None
-    # every output is checked before planning, so that a bad path costs no planning time
-    roles = {
-        f"--{key}": getattr(args, key) for key in ("json", "csv", "html") if getattr(args, key)
-    }
-    plots = _plots_folder(args.plots) if args.plots else None
-    if plots is not None and plots.is_dir():
-        roles.update({f"--plots {name}": plots / name for name in FIGURE_NAMES})
-    outputs = check_outputs(roles)
+    outputs, plots = _check_output_places(args)
     to_stdout = any(o.kind is OutputKind.STDOUT for o in outputs.values())
     out = sys.stderr if to_stdout else sys.stdout  # the standard output may carry a file
     prepared = prepare(request)
@@ -365,6 +384,38 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
 
     with interrupt.armed():
         result = solve(prepared, None if quiet else progress, None if quiet else segment_progress)
+    _print_summary(result, out)
+    report = check(result, prepared)
+    if args.verify:
+        print(report, file=out)
+    report.raise_if_failed()  # nothing is written for a motion that fails
+    _write(result, args, outputs, plots, out)
+    if args.show:
+        _show(result, out)
+    return 130 if result.status == StopReason.INTERRUPTED else 0
+
+
+def _check_output_places(args: argparse.Namespace) -> tuple[dict[str, Output], Path | None]:
+    """Every output place, checked before planning (a bad path costs no planning time); the
+    figures' folder."""
+    if args.plots:
+        try:
+            import matplotlib  # noqa: F401
+        except ImportError:
+            raise ConfigurationError(
+                "--plots needs matplotlib: pip install 'nearopt[viz]'"
+            ) from None
+    roles = {
+        f"--{key}": getattr(args, key) for key in ("json", "csv", "html") if getattr(args, key)
+    }
+    plots = _plots_folder(args.plots) if args.plots else None
+    if plots is not None and plots.is_dir():
+        roles.update({f"--plots {name}": plots / name for name in FIGURE_NAMES})
+    return check_outputs(roles), plots
+
+
+def _print_summary(result: PlanResult | TaskResult, out: TextIO) -> None:
+    """The plan in a few lines: J, te, iterations (per segment for a task), the clearance."""
     if isinstance(result, TaskResult):
         print(
             f"{result.status}: J = {result.J:.6f} (first paths {result.initial_J:.6f}), "
@@ -402,11 +453,17 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
             f"(margin {c.level * 1e3:.1f} mm, certified along the whole path)",
             file=out,
         )
-    report = check(result, prepared)
-    if args.verify:
-        print(report, file=out)
-    report.raise_if_failed()  # nothing is written for a motion that fails
-    # everything is produced first, then written: a failure leaves no file behind
+
+
+def _write(
+    result: PlanResult | TaskResult,
+    args: argparse.Namespace,
+    outputs: dict[str, Output],
+    plots: Path | None,
+    out: TextIO,
+) -> None:
+    """Produce every output first, then write them all (a failure leaves no file behind); the
+    sampling warnings after success only."""
     contents: dict[Output, str | bytes] = {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SamplingWarning)
@@ -433,22 +490,24 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
         print(f"wrote {name}", file=out)
     for message in dict.fromkeys(str(w.message) for w in caught):  # after success only
         print(f"nearopt: warning: {message}", file=sys.stderr)
-    if args.show:
-        from .viz.viewer import show
 
-        signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C ends the show
-        with show(result) as viewer:
-            print(
-                f"playing at {viewer.url} (meshcat on 127.0.0.1 only); Ctrl+C stops it",
-                file=out,
-                flush=True,
-            )
-            try:
-                while True:
-                    time.sleep(1.0)
-            except KeyboardInterrupt:
-                pass
-    return 130 if result.status == StopReason.INTERRUPTED else 0
+
+def _show(result: PlanResult | TaskResult, out: TextIO) -> None:
+    """Play the plan in the browser until Ctrl-C."""
+    from .viz.viewer import show
+
+    signal.signal(signal.SIGINT, signal.default_int_handler)  # Ctrl-C ends the show
+    with show(result) as viewer:
+        print(
+            f"playing at {viewer.url} (meshcat on 127.0.0.1 only); Ctrl+C stops it",
+            file=out,
+            flush=True,
+        )
+        try:
+            while True:
+                time.sleep(1.0)
+        except KeyboardInterrupt:
+            pass
 
 
 def _batch_command(args: argparse.Namespace) -> int:
