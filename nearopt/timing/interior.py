@@ -260,25 +260,10 @@ def solve_interior(
         rows = _without_implied(disc, rows, cap, sample)
     free = np.arange(1, big_n)
 
-    # the torque samples of the energy term, joint-major as in Discretisation
-    energy = bool(np.any(weights > 0.0))
-    if energy:
-        t_rows = np.arange(disc.blocks.torque.start, disc.blocks.torque.stop)
-        t_w = weights[disc.joint[t_rows]]
-        t_rows, t_w = t_rows[t_w > 0.0], t_w[t_w > 0.0]
-        t_left, t_sn = disc.left[t_rows], disc.sqrt_node[t_rows]
-        t_cl, t_cr = disc.coef_left[t_rows], disc.coef_right[t_rows]
-        t_d, t_o = disc.sqrt_coef[t_rows], disc.offset[t_rows]
+    e_rows = _energy_rows(disc, weights)
 
     # ------------------------------------------------------------------ the start
-    if guess is not None and np.all(np.isfinite(guess)) and np.max(guess[1:-1]) > 0.0:
-        shape = np.asarray(guess, dtype=float)[1:-1].copy()
-        shape = np.maximum(shape, 1e-3 * np.minimum(sigma[1:-1], 1.0 - sigma[1:-1]) * shape.max())
-    else:
-        shape = _shape(rows, sigma)
-    shape = np.minimum(shape, np.where(np.isfinite(cap), cap, np.inf))
-    shape_b = np.concatenate([[0.0], shape, [0.0]])
-    alpha = _start_scale(rows, shape_b)
+    alpha, shape = _start(rows, cap, sigma, guess)
     if not np.isfinite(alpha):
         return InteriorSolution(
             np.zeros(big_n - 1),
@@ -300,35 +285,14 @@ def solve_interior(
         np.concatenate([rows.const, np.zeros(big_n - 1)]),
     )
     m = rows.left.size
-    if energy:
-        e_rows = (t_left, t_cl, t_cr, t_d, t_sn, t_o, t_w)
-    else:
-        e_rows = (
-            np.zeros(0, dtype=np.int64),
-            *(np.zeros(0) for _ in range(2)),
-            np.zeros(0),
-            np.zeros(0, dtype=np.int64),
-            np.zeros(0),
-            np.zeros(0),
-        )
     s = -rows.values(np.concatenate([[0.0], z, [0.0]]), np.sqrt(np.concatenate([[0.0], z, [0.0]])))
     if np.any(s <= 0.0):
         return InteriorSolution(z, False, 0, "the start is not strictly feasible")
     f_scale = 1.0 / disc.torque_cost(z, weights)
     y = (1.0 / m) / s  # centred, with a duality gap of the order of F (scaled to 1)
     args = (
-        np.ascontiguousarray(rows.left, dtype=np.int64),
-        rows.coef_left,
-        rows.coef_right,
-        rows.sqrt_coef,
-        np.ascontiguousarray(rows.sqrt_node, dtype=np.int64),
-        rows.const,
-        np.ascontiguousarray(e_rows[0], dtype=np.int64),
-        e_rows[1],
-        e_rows[2],
-        e_rows[3],
-        np.ascontiguousarray(e_rows[4], dtype=np.int64),
-        e_rows[5],
+        *_kernel_rows(rows),
+        *_kernel_rows(e_rows[:6]),
         e_rows[6],
         ds,
         scale,
@@ -352,6 +316,56 @@ def solve_interior(
     return InteriorSolution(
         z, False, done, f"no convergence in {max_iterations} iterations", rows=m
     )
+
+
+def _energy_rows(disc: Discretisation, weights: NDArray[np.float64]) -> tuple:
+    """The torque samples of the energy term Σ w_i u_i² (joint-major as in Discretisation) in
+    pair form, with their weights; empty when no weight is positive (time-optimal)."""
+    t_rows = np.arange(disc.blocks.torque.start, disc.blocks.torque.stop)
+    if not np.any(weights > 0.0):
+        t_rows = t_rows[:0]
+    t_w = weights[disc.joint[t_rows]]
+    t_rows, t_w = t_rows[t_w > 0.0], t_w[t_w > 0.0]
+    return (
+        disc.left[t_rows],
+        disc.coef_left[t_rows],
+        disc.coef_right[t_rows],
+        disc.sqrt_coef[t_rows],
+        disc.sqrt_node[t_rows],
+        disc.offset[t_rows],
+        t_w,
+    )
+
+
+def _kernel_rows(rows: tuple) -> tuple:
+    """Pair-form rows (left, coef_left, coef_right, sqrt_coef, sqrt_node, const) as the kernel
+    takes them (contiguous, the knots as int64)."""
+    left, cl, cr, sd, sn, const = rows
+    return (
+        np.ascontiguousarray(left, dtype=np.int64),
+        np.ascontiguousarray(cl, dtype=float),
+        np.ascontiguousarray(cr, dtype=float),
+        np.ascontiguousarray(sd, dtype=float),
+        np.ascontiguousarray(sn, dtype=np.int64),
+        np.ascontiguousarray(const, dtype=float),
+    )
+
+
+def _start(
+    rows: _Rows,
+    cap: NDArray[np.float64],
+    sigma: NDArray[np.float64],
+    guess: NDArray[np.float64] | None,
+) -> tuple[float, NDArray[np.float64]]:
+    """The start's shape at the free knots (the guess', else :func:`_shape`, under the caps) and
+    the largest scale α of it the rows allow (the start is half of that)."""
+    if guess is not None and np.all(np.isfinite(guess)) and np.max(guess[1:-1]) > 0.0:
+        shape = np.asarray(guess, dtype=float)[1:-1].copy()
+        shape = np.maximum(shape, 1e-3 * np.minimum(sigma[1:-1], 1.0 - sigma[1:-1]) * shape.max())
+    else:
+        shape = _shape(rows, sigma)
+    shape = np.minimum(shape, np.where(np.isfinite(cap), cap, np.inf))
+    return _start_scale(rows, np.concatenate([[0.0], shape, [0.0]])), shape
 
 
 def load_kernel() -> None:
