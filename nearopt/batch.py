@@ -236,12 +236,7 @@ def plan_request(
     try:
         outcome = run(request.plan_request(rate), robot_loader=_cached_robot)
         result = outcome.result
-        segments = getattr(result, "segments", None)
-        iterations = (
-            sum(len(s.history) - 1 for s in segments)
-            if segments is not None
-            else len(result.history) - 1
-        )
+        iterations = result.iterations
         wall = time.perf_counter() - t0
         notes = list(outcome.warnings)
         with warnings.catch_warnings():

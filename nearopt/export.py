@@ -12,16 +12,13 @@ import io
 import json
 import warnings
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .errors import SamplingWarning
 from .kinematics import ToolPose
 from .outputs import write_atomically
-
-if TYPE_CHECKING:
-    from .planning import PlanResult, TaskResult
+from .planning import Plan, TaskResult
 
 __all__ = [
     "check_sampling",
@@ -35,7 +32,7 @@ __all__ = [
 KEYS = ("q", "qd", "qdd", "tau")
 
 
-def check_sampling(result: PlanResult | TaskResult, rate: float) -> str | None:
+def check_sampling(result: Plan, rate: float) -> str | None:
     """A warning (also issued as :class:`~nearopt.SamplingWarning`) if samples at ``rate`` [Hz]
     can miss a constant-acceleration phase of the motion, else None."""
     faithful = result.trajectory.faithful_rate()
@@ -50,9 +47,7 @@ def check_sampling(result: PlanResult | TaskResult, rate: float) -> str | None:
     return message
 
 
-def json_text(
-    result: PlanResult | TaskResult, rate: float = 1000.0, extra: dict[str, object] | None = None
-) -> str:
+def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | None = None) -> str:
     """The plan as ``{"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
     "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists), and ``"via": [{"t",
     "q"}, …]`` when the motion passes via-points.
@@ -79,7 +74,7 @@ def json_text(
         "t": samples.t.tolist(),
         **{key: getattr(samples, key).tolist() for key in KEYS},
     }
-    segments = getattr(result, "segments", None)
+    segments = result.segments if isinstance(result, TaskResult) else None
     if segments is None:
         document["history"] = [{"J": it.J, "alpha": it.alpha} for it in result.history]
         if result.via:  # where the motion passes its via-points
@@ -126,7 +121,7 @@ def _pose(goal: object) -> list[float] | None:
     return [float(x) for x in (*goal.position, *(goal.quaternion or ()))]
 
 
-def csv_text(result: PlanResult | TaskResult, rate: float = 1000.0) -> str:
+def csv_text(result: Plan, rate: float = 1000.0) -> str:
     """The plan's samples as CSV: a header row ``t, q_<joint>…, qd_<joint>…, qdd_…, tau_…``;
     a task's has a last column ``segment`` (1, 2, …: the rest-to-rest piece a sample belongs
     to; a sample on a stop belongs to the piece that starts there, the last to the last).
@@ -138,7 +133,7 @@ def csv_text(result: PlanResult | TaskResult, rate: float = 1000.0) -> str:
     names = result.robot.joint_names
     header = ["t"] + [f"{key}_{name}" for key in KEYS for name in names]
     rows = np.column_stack([samples.t, *(getattr(samples, key) for key in KEYS)])
-    segments = getattr(result, "segments", None)
+    segments = result.segments if isinstance(result, TaskResult) else None
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     if segments is None:
@@ -153,11 +148,11 @@ def csv_text(result: PlanResult | TaskResult, rate: float = 1000.0) -> str:
     return buffer.getvalue()
 
 
-def write_json(result: PlanResult | TaskResult, path: str | Path, rate: float = 1000.0) -> Path:
+def write_json(result: Plan, path: str | Path, rate: float = 1000.0) -> Path:
     """Write :func:`json_text` to ``path`` (atomically)."""
     return write_atomically(path, json_text(result, rate))
 
 
-def write_csv(result: PlanResult | TaskResult, path: str | Path, rate: float = 1000.0) -> Path:
+def write_csv(result: Plan, path: str | Path, rate: float = 1000.0) -> Path:
     """Write :func:`csv_text` to ``path`` (atomically)."""
     return write_atomically(path, csv_text(result, rate))

@@ -178,3 +178,16 @@ def test_run_plans_and_verifies_in_this_process() -> None:
     assert outcome.report.passed and outcome.prepared.request is request
     assert isinstance(outcome.result, nearopt.PlanResult)
     np.testing.assert_array_equal(outcome.result.cost.torque_weights(2), [0.03, 0.03])
+
+
+def test_single_plans_and_tasks_are_plans(tmp_path: Path) -> None:
+    """One Plan protocol: what export, figures and the batch read of either kind."""
+    task = tmp_path / "t.toml"
+    task.write_text("[[target]]\nq = [0.2, -0.3]\nstop = false\n[[target]]\nq = [0.5, 0.4]\n")
+    common = {"robot": "two_link", "q0": (0.7, -1.5), "grid": 60, "max_iterations": 2}
+    single = run(PlanRequest(**common, qe=(-1.5, 0.0))).result
+    chained = run(PlanRequest(**common, task=str(task))).result
+    for result in (single, chained):
+        assert isinstance(result, nearopt.Plan)
+        assert result.iterations == sum(len(p.history) - 1 for p in result.parts)
+    assert single.parts == (single,) and chained.parts == chained.segments

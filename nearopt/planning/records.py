@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from enum import StrEnum
-from typing import TYPE_CHECKING, Literal
+from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
@@ -246,6 +246,16 @@ class PlanResult:
         return self.initial.trajectory
 
     @property
+    def parts(self) -> tuple[PlanResult, ...]:
+        """The rest-to-rest plans it is made of: itself."""
+        return (self,)
+
+    @property
+    def iterations(self) -> int:
+        """Stage-2 iterations accepted (the first path not counted)."""
+        return len(self.history) - 1
+
+    @property
     def initial_J(self) -> float:  # noqa: N802 - the paper's name
         """J of :attr:`initial_trajectory` (the paper's J^0)."""
         return self.initial.J
@@ -274,3 +284,48 @@ class PlanResult:
     def duration(self) -> float:
         """t_e [s]."""
         return self.timing.duration
+
+
+@runtime_checkable
+class Plan(Protocol):
+    """What a single plan (:class:`PlanResult`) and a task (:class:`~nearopt.TaskResult`) both
+    are: a verified motion of a robot, its cost, how planning stopped, its targets on the way."""
+
+    @property
+    def robot(self) -> Robot: ...
+
+    @property
+    def trajectory(self) -> Trajectory: ...
+
+    @property
+    def J(self) -> float: ...  # noqa: N802 - the paper's name
+
+    @property
+    def duration(self) -> float: ...
+
+    @property
+    def cost(self) -> Cost: ...
+
+    @property
+    def status(self) -> StopReason: ...
+
+    @property
+    def collisions(self) -> CollisionModel | None: ...
+
+    @property
+    def clearance(self) -> Clearance | None: ...
+
+    @property
+    def goal(self) -> ToolPose | None: ...
+
+    @property
+    def waypoints(self) -> tuple[Waypoint, ...]: ...
+
+    @property
+    def initial_J(self) -> float: ...  # noqa: N802
+
+    @property
+    def parts(self) -> tuple[PlanResult, ...]: ...
+
+    @property
+    def iterations(self) -> int: ...

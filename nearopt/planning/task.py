@@ -327,6 +327,16 @@ class TaskResult:
         )
 
     @property
+    def parts(self) -> tuple[PlanResult, ...]:
+        """Its rest-to-rest segments, in order."""
+        return self.segments
+
+    @property
+    def iterations(self) -> int:
+        """Stage-2 iterations accepted, over all its segments."""
+        return sum(segment.iterations for segment in self.segments)
+
+    @property
     def goal(self) -> ToolPose | None:
         """The last target, when it is a tool pose."""
         last = self.targets[-1].goal

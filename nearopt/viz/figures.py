@@ -20,6 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..outputs import make_folder, write_atomically
+from ..planning import Plan, TaskResult
 from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:
@@ -28,7 +29,6 @@ if TYPE_CHECKING:
 
     from ..collision import Scene
     from ..kinematics import ToolPose
-    from ..planning import PlanResult, TaskResult
     from ..robot import Robot
     from ..trajectory import ChainedTrajectory, Trajectory
 
@@ -331,7 +331,7 @@ def _hull(points: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def plot_history(
-    result: PlanResult | TaskResult,
+    result: Plan,
     reference: dict[int, float] | None = None,
     reference_label: str = "paper, Table 2",
 ) -> Figure:
@@ -348,7 +348,7 @@ def plot_history(
     """
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 4))
-    segments = getattr(result, "segments", None)
+    segments = result.segments if isinstance(result, TaskResult) else None
     if segments is None:
         j = [it.index for it in result.history]
         label = f"nearopt ({result.method})"
@@ -376,9 +376,7 @@ def plot_history(
     return fig
 
 
-def render_figures(
-    result: PlanResult | TaskResult, reference: dict[int, float] | None = None
-) -> dict[str, bytes]:
+def render_figures(result: Plan, reference: dict[int, float] | None = None) -> dict[str, bytes]:
     """torques.png, speeds.png (accelerations.png if the robot has acceleration limits),
     workspace.png and history.png of a plan, as PNG bytes by file name."""
     plt = _pyplot()
@@ -406,7 +404,7 @@ def render_figures(
 
 
 def save_figures(
-    result: PlanResult | TaskResult, folder: str | Path, reference: dict[int, float] | None = None
+    result: Plan, folder: str | Path, reference: dict[int, float] | None = None
 ) -> list[Path]:
     """Write the figures of :func:`render_figures` for a plan into ``folder`` (made if it is
     missing, with its parents).
