@@ -2,8 +2,25 @@
 
 The package follows the paper "Near-Optimum Trajectory Planning for Robot Manipulators":
 ``robot`` (URDF → Pinocchio: H, h, g, D, limits, derivatives) → ``path`` (θ(s)) → ``timing``
-(stage 1, λ(s)) → ``trajectory`` (θ(t)) → ``path optimisation`` (stage 2) → ``plan`` →
-``verify``; ``viewer`` and ``figures`` to look at it, ``export`` to write it.
+(stage 1, λ(s)) → ``trajectory`` (θ(t)) → ``planning`` (stage 2, tasks) → ``verify``; ``viz``
+to look at it, ``export`` to write it; ``api`` (one request), ``batch`` and ``cli`` on top.
+
+Glossary (the names the code uses, and their symbols):
+
+=====================  =======================================================================
+n, ``dof``             joints (degrees of freedom)
+θ, ``q``               joint positions [rad or m], shape (n,) or (samples, n); θ0 ``q0``, θe ``qe``
+θ̇, θ̈, ``qd``, ``qdd``   joint speeds and accelerations
+u, ``tau``, effort     joint torques (forces) of eq. (1) [N·m or N]; ``effort`` for their limits
+s                      the path's own parameter, θ(s) on [0, s_e] (``Path.s_end``)
+σ, ``sigma``           s / s_e ∈ [0, 1], stage 1's grid (knots σ_k, N = ``grid`` segments)
+λ, ``lam``             ds/dt, the timing (eq. 5); b = λ² and a = λλ' = ½ db/ds, linear in u
+t_e, ``duration``      the motion's duration [s]
+f0, J                  the running cost and J = ∫ f0 dt (eq. 3); ``cost`` is an f0
+stage 1, ``timing``    the optimal λ(s) of a fixed path; stage 2, ``planning``: the path's update
+α, ``step``            stage 2's step length along its direction
+``status``             why a planner stopped (``StopReason``); ``message`` the same in words
+=====================  =======================================================================
 """
 
 from .batch import MotionOutcome, MotionRequest, plan_many
