@@ -45,7 +45,7 @@ from ..errors import InfeasiblePathError, SolverError, UnreachablePoseError
 from ..kinematics import ToolPose, inverse_kinematics, task_jacobian
 from ..path import BSplinePath
 from ..timing import Discretisation, LinearRows, is_solved, optimal_timing, solve_conic
-from .linearisation import path_basis, row_path_jacobian
+from .linearisation import PathBasis, path_basis, row_path_jacobian
 from .records import Iteration, MethodOutcome, SCPOptions, StopReason
 
 if TYPE_CHECKING:
@@ -130,15 +130,7 @@ def sequential_convex(
         start = BSplinePath.line(q0, qe, k_count, breaks)
     ends = start.control_points[[0, -1]]
     iterate_grid = min(grid, max(options.grid, 4 * k_count))  # ≥ 4 segments per control point
-    lim = robot.limits
-    # a control point moved by δ changes θ' by about δ·(K − 1): the trust region is measured in
-    # changes of θ' relative to each joint's scale (its motion, at least 10 % of its range and
-    # 0.1 rad), where the linearisation's error grows
-    scale = np.maximum.reduce([np.abs(qe - q0), 0.1 * _range(lim), np.full(n, 0.1)])
-    moving = k_count + (goal is not None)  # the interior control points, and θe with a goal
-    scale = np.tile(scale / (k_count - 1), moving)
-    lower = np.tile(lim.position_lower, moving) if position_limits else np.full(n * moving, -np.inf)
-    upper = np.tile(lim.position_upper, moving) if position_limits else np.full(n * moving, np.inf)
+    scale, lower, upper = _trust_scale(robot, q0, qe, k_count, goal is not None, position_limits)
 
     def path_of(p: NDArray[np.float64]) -> BSplinePath:
         end = ends[1:] if goal is None else p[-n:][None, :]
@@ -178,22 +170,9 @@ def sequential_convex(
         z = timing.b[1:-1]
         if basis is None:  # the grid (knots, interior points) is the same for every iterate
             basis = path_basis(timing.trajectory.path, disc, end=goal is not None)
-        model = _model(disc, z, row_path_jacobian(robot, disc, z, basis), radius * scale)
-        if collisions is not None:
-            model = _with_rows(
-                model,
-                *collision_rows(collisions, path_of(p), radius * scale[:n], end=goal is not None),
-            )
-        if via:  # every iterate goes through the via-points: B(σ_v) Δp = 0 per joint
-            at = start.basis(np.asarray(via))[:, 1 : None if goal is not None else -1]
-            rows = sp.csr_matrix(np.kron(at, np.eye(n)))
-            model = _with_rows(model, rows, np.zeros(rows.shape[0]), np.zeros(rows.shape[0]))
-        if goal is not None:  # θe moves along the pose: J_task Δθe = 0
-            task = task_jacobian(robot, goal, p[-n:])
-            rows = sp.hstack([sp.csr_matrix((task.shape[0], p.size - n)), sp.csr_matrix(task)])
-            model = _with_rows(
-                model, rows.tocsr(), np.zeros(task.shape[0]), np.zeros(task.shape[0])
-            )
+        model = _iterate_model(
+            robot, disc, z, basis, p, path_of(p), radius * scale, collisions, start, via, goal
+        )
         j0 = timing.objective
         step = _solve_model(disc, weights, model, p, radius * scale, lower, upper)
         if step is None:  # numerical trouble: a smaller step is a better-conditioned model
@@ -212,19 +191,16 @@ def sequential_convex(
                 f"{options.tolerance:g} relative"
             )
             break
-        trial = None
-        p_trial = p + dp
-        if goal is not None:  # back onto the pose (to first order the step never left it)
-            end = _onto(robot, goal, p_trial[-n:])
-            p_trial = None if end is None else np.concatenate([p_trial[:-n], end])
-        if p_trial is not None and (
-            collisions is None or collisions.path_clearance(path_of(p_trial)).certified
-        ):
-            try:
-                trial = time_it(p_trial, timing, disc.b(z_model))
-                evaluations += 1
-            except (InfeasiblePathError, SolverError):
-                trial = None
+        guess = disc.b(z_model)  # stage 1 of the trial starts from the model's timing
+        p_trial, trial, timed = _try_step(
+            robot,
+            p + dp,
+            goal,
+            collisions,
+            path_of,
+            lambda q, like=timing, guess=guess: time_it(q, like, guess),
+        )
+        evaluations += timed
         gain = -np.inf if trial is None else j0 - trial.objective
         ratio = gain / (j0 - predicted)
         reach = float(np.max(np.abs(dp) / scale))  # the step's length, as a fraction of scale
@@ -265,15 +241,109 @@ def sequential_convex(
             )
             break
     if iterate_grid < grid:  # the returned path on the plan's own grid
-        try:
-            timing = time_it(p, on=grid)
-            evaluations += 1
-        except (InfeasiblePathError, SolverError) as exc:  # keep the iterate's own timing
-            message += (
+        timing, message, timed = _on_plan_grid(
+            lambda: time_it(p, on=grid), timing, message, iterate_grid
+        )
+        evaluations += timed
+    return MethodOutcome(timing, reason, message, evaluations)
+
+
+def _trust_scale(
+    robot: Robot,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    k_count: int,
+    moving_goal: bool,
+    position_limits: bool,
+) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+    """The trust region's scale of every moving coordinate (the interior control points, and θe
+    with a goal pose) and their bounds (the position limits, when they hold)."""
+    n, lim = robot.n, robot.limits
+    # a control point moved by δ changes θ' by about δ·(K − 1): the trust region is measured in
+    # changes of θ' relative to each joint's scale (its motion, at least 10 % of its range and
+    # 0.1 rad), where the linearisation's error grows
+    scale = np.maximum.reduce([np.abs(qe - q0), 0.1 * _range(lim), np.full(n, 0.1)])
+    moving = k_count + moving_goal  # the interior control points, and θe with a goal
+    scale = np.tile(scale / (k_count - 1), moving)
+    lower = np.tile(lim.position_lower, moving) if position_limits else np.full(n * moving, -np.inf)
+    upper = np.tile(lim.position_upper, moving) if position_limits else np.full(n * moving, np.inf)
+    return scale, lower, upper
+
+
+def _on_plan_grid(
+    time_it: Callable[[], TimingResult], timing: TimingResult, message: str, iterate_grid: int
+) -> tuple[TimingResult, str, int]:
+    """The returned path timed on the plan's own grid (the iterate's timing kept, and said,
+    where stage 1 fails there); the stage-1 solves spent."""
+    try:
+        return time_it(), message, 1
+    except (InfeasiblePathError, SolverError) as exc:  # keep the iterate's own timing
+        return (
+            timing,
+            message
+            + (
                 f"; timed on the iterate grid ({iterate_grid} segments): on the plan's "
                 f"grid stage 1 failed ({exc})"
-            )
-    return MethodOutcome(timing, reason, message, evaluations)
+            ),
+            0,
+        )
+
+
+def _iterate_model(
+    robot: Robot,
+    disc: Discretisation,
+    z: NDArray[np.float64],
+    basis: PathBasis,
+    p: NDArray[np.float64],
+    path: BSplinePath,
+    reach: NDArray[np.float64],
+    collisions: CollisionModel | None,
+    start: BSplinePath,
+    via: tuple[float, ...],
+    goal: ToolPose | None,
+) -> _Model:
+    """The convex model at the iterate p (path ``path``, timing z): stage 1's rows linearised in
+    the path, the clearances, the via-points kept (B(σ_v) Δp = 0 per joint) and θe kept on the
+    pose (J_task Δθe = 0)."""
+    n = robot.n
+    model = _model(disc, z, row_path_jacobian(robot, disc, z, basis), reach)
+    if collisions is not None:
+        model = _with_rows(
+            model, *collision_rows(collisions, path, reach[:n], end=goal is not None)
+        )
+    if via:  # every iterate goes through the via-points: B(σ_v) Δp = 0 per joint
+        at = start.basis(np.asarray(via))[:, 1 : None if goal is not None else -1]
+        rows = sp.csr_matrix(np.kron(at, np.eye(n)))
+        model = _with_rows(model, rows, np.zeros(rows.shape[0]), np.zeros(rows.shape[0]))
+    if goal is not None:  # θe moves along the pose: J_task Δθe = 0
+        task = task_jacobian(robot, goal, p[-n:])
+        rows = sp.hstack([sp.csr_matrix((task.shape[0], p.size - n)), sp.csr_matrix(task)])
+        model = _with_rows(model, rows.tocsr(), np.zeros(task.shape[0]), np.zeros(task.shape[0]))
+    return model
+
+
+def _try_step(
+    robot: Robot,
+    p_trial: NDArray[np.float64],
+    goal: ToolPose | None,
+    collisions: CollisionModel | None,
+    path_of: Callable[[NDArray[np.float64]], BSplinePath],
+    time_it: Callable[[NDArray[np.float64]], TimingResult],
+) -> tuple[NDArray[np.float64] | None, TimingResult | None, int]:
+    """The step's iterate (θe back onto the pose), its timing if it is certified clear and
+    stage 1 times it (None otherwise), and the stage-1 solves spent (0 or 1)."""
+    n = robot.n
+    if goal is not None:  # back onto the pose (to first order the step never left it)
+        end = _onto(robot, goal, p_trial[-n:])
+        p_trial = None if end is None else np.concatenate([p_trial[:-n], end])
+    if p_trial is None or not (
+        collisions is None or collisions.path_clearance(path_of(p_trial)).certified
+    ):
+        return p_trial, None, 0
+    try:
+        return p_trial, time_it(p_trial), 1
+    except (InfeasiblePathError, SolverError):
+        return p_trial, None, 0
 
 
 ACTIVATION = 0.05
