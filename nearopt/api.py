@@ -30,6 +30,7 @@ from .kinematics import ToolPose
 from .planning import METHODS, Iteration, PlanResult, Task, TaskResult, plan, plan_task
 from .planning.task import check_targets
 from .robot import Robot
+from .validate import MAX_RATE, MAX_SAMPLES, check_rate, check_samples
 from .verify import VerificationReport, verify
 
 if TYPE_CHECKING:
@@ -50,8 +51,6 @@ __all__ = [
     "MAX_RATE",
 ]
 
-MAX_SAMPLES = 10_000_000  # rate × te: beyond this a file would take gigabytes
-MAX_RATE = 1e6  # [Hz] a sampling rate above a megahertz is a mistake, not a controller
 OUTPUT_OPTIONS = ("json", "csv", "html", "plots", "show")
 """Options of ``nearopt plan`` that write or show the plan: the caller's, not the request's."""
 DISPLAY_OPTIONS = ("verify", "quiet")
@@ -194,10 +193,7 @@ class PlanRequest:
             raise ConfigurationError(
                 f"method must be one of {', '.join(METHODS)}, got {self.method!r}"
             )
-        if not (np.isfinite(self.rate) and 0 < self.rate <= MAX_RATE):
-            raise ConfigurationError(
-                f"--rate must be a number of Hz in (0, {MAX_RATE:.0e}], got {self.rate}"
-            )
+        check_rate(self.rate, "--rate")
         if not self.time_limit > 0:
             raise ConfigurationError(
                 "--time-limit must be a positive number of seconds (inf: none), got "
@@ -507,11 +503,7 @@ def check(result: PlanResult | TaskResult, prepared: Prepared) -> VerificationRe
         If the rate over the motion's duration gives more than :data:`MAX_SAMPLES` samples.
     """
     request = prepared.request
-    if request.rate * result.duration > MAX_SAMPLES:
-        raise ConfigurationError(
-            f"--rate {request.rate:g} Hz over te = {result.duration:.4g} s gives more than "
-            f"{MAX_SAMPLES:.0e} samples"
-        )
+    check_samples(request.rate, result.duration, "--rate")
     qe = prepared.qe
     if prepared.task is not None:
         last = prepared.task.targets[-1].goal

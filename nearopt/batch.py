@@ -45,6 +45,7 @@ from typing import TYPE_CHECKING, Any
 from .api import PlanRequest, run
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .outputs import make_folder, resolve_output, write_atomically, write_outputs
+from .validate import check_rate
 
 if TYPE_CHECKING:
     from .planning import PlanResult, TaskResult
@@ -537,11 +538,6 @@ def _requests(requests: Iterable[MotionRequest | Mapping[str, Any]]) -> list[Mot
     return out
 
 
-def _check_rate(rate: float) -> None:
-    if isinstance(rate, bool) or not isinstance(rate, int | float) or not 0 < rate <= 1e6:
-        raise ConfigurationError(f"rate must be a number of Hz in (0, 1e6], got {rate!r}")
-
-
 def _pool(client: object | None, workers: int | None) -> Pool:
     if client is None:
         return LocalPool(workers)
@@ -574,7 +570,7 @@ def plan_many(
     rate
         The samples' rate of the JSON documents [Hz].
     """
-    _check_rate(rate)
+    check_rate(rate)
     requests = _requests(requests)
     order = {r.id: k for k, r in enumerate(requests)}
     outcomes: list[MotionOutcome | None] = [None] * len(requests)
@@ -642,7 +638,7 @@ def run_batch(
         Called as results arrive with (done, failed, running, total, ETA [s]).
     """
     t0 = time.perf_counter()
-    _check_rate(rate)
+    check_rate(rate)
     folder = make_folder(out, "the motions")
     outcomes: dict[str, MotionOutcome] = {}
     for request in requests:

@@ -28,15 +28,14 @@ from dataclasses import fields
 from pathlib import Path
 from typing import TYPE_CHECKING, NoReturn, TextIO
 
-import numpy as np
-
-from .api import MAX_RATE, PlanRequest, check, prepare, solve
+from .api import PlanRequest, check, prepare, solve
 from .catalog import available_robots
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .export import csv_text, json_text
 from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
 from .path import StraightPath
 from .planning import METHODS, Iteration, PlanResult, StopReason, TaskResult
+from .validate import check_rate
 from .verify import VerificationError
 
 if TYPE_CHECKING:
@@ -515,10 +514,7 @@ def _batch_command(args: argparse.Namespace) -> int:
     Ctrl-C (what was written stays: run it again to go on)."""
     from .batch import progress_line, read_requests, run_batch
 
-    if not (np.isfinite(args.rate) and 0 < args.rate <= MAX_RATE):
-        raise ConfigurationError(
-            f"--rate must be a number of Hz in (0, {MAX_RATE:.0e}], got {args.rate}"
-        )
+    check_rate(args.rate, "--rate")
     if args.workers is not None and args.workers < 1:
         raise ConfigurationError(f"--workers must be ≥ 1, got {args.workers}")
     requests = read_requests(args.tasks)

@@ -19,6 +19,7 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from .errors import ConfigurationError
+from .validate import check_rate
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -97,10 +98,10 @@ class Motion:
         Raises
         ------
         ConfigurationError
-            If the rate is not a positive number or would give more than 1e8 samples.
+            If the rate is not a number of Hz in (0, 1e6] (:func:`~nearopt.validate.check_rate`)
+            or would give more than 1e8 samples.
         """
-        if not (np.isfinite(rate) and rate > 0):
-            raise ConfigurationError(f"the sampling rate must be > 0 Hz, got {rate}")
+        rate = check_rate(rate, "the sampling rate")
         if self.duration * rate > 1e8:
             raise ConfigurationError(
                 f"sampling at rate {rate:g} Hz over {self.duration:.4g} s would give more than "

@@ -16,7 +16,8 @@ import numpy as np
 import pinocchio as pin
 from scipy.integrate import solve_ivp
 
-from .errors import ConfigurationError, NearoptError
+from .errors import NearoptError
+from .validate import check_rate
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -210,10 +211,9 @@ def verify(
     Raises
     ------
     ConfigurationError
-        If the rate is not positive or q0 / qe have the wrong length.
+        If the rate is not a number of Hz in (0, 1e6] or q0 / qe have the wrong length.
     """
-    if not (np.isfinite(rate) and rate > 0):
-        raise ConfigurationError(f"the controller rate must be > 0 Hz, got {rate}")
+    rate = check_rate(rate, "the controller rate")
     tol = Tolerances(
         torque_tolerance,
         limit_tolerance,

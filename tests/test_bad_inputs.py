@@ -737,7 +737,7 @@ CASES = {
         ),
         None,
         ConfigurationError,
-        "rate must be > 0 Hz",
+        "the controller rate must be a number of Hz in (0, 1e+06], got -1",
     ),
     # ------------------------------------------------------------ command line and outputs
     "q0 that is not a number": Case(

@@ -1,0 +1,47 @@
+"""Argument checks every layer shares (the request, the command line, batches, sampling,
+verification), one message each."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .errors import ConfigurationError
+
+__all__ = ["MAX_RATE", "MAX_SAMPLES", "check_rate", "check_samples"]
+
+MAX_RATE = 1e6
+"""[Hz] A sampling or controller rate above a megahertz is a mistake, not a controller."""
+MAX_SAMPLES = 10_000_000
+"""Samples of a written motion (rate × t_e) at most: beyond, a file would take gigabytes."""
+
+
+def check_rate(rate: object, what: str = "rate") -> float:
+    """A sampling or controller rate [Hz]: a finite number in (0, :data:`MAX_RATE`].
+
+    Raises
+    ------
+    ConfigurationError
+        ``"{what} must be a number of Hz in (0, 1e+06], got …"``.
+    """
+    number = isinstance(rate, int | float | np.integer | np.floating) and not isinstance(rate, bool)
+    if not (number and np.isfinite(rate) and 0 < rate <= MAX_RATE):  # type: ignore[operator]
+        raise ConfigurationError(
+            f"{what} must be a number of Hz in (0, {MAX_RATE:.0e}], got {rate!r}"
+        )
+    return float(rate)  # type: ignore[arg-type]
+
+
+def check_samples(rate: float, duration: float, what: str = "rate") -> None:
+    """That a motion of ``duration`` [s] written at ``rate`` [Hz] has at most
+    :data:`MAX_SAMPLES` samples.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the rate, the duration and the cap.
+    """
+    if rate * duration > MAX_SAMPLES:
+        raise ConfigurationError(
+            f"{what} {rate:g} Hz over te = {duration:.4g} s gives more than {MAX_SAMPLES:.0e} "
+            "samples"
+        )
