@@ -92,7 +92,7 @@ def pose_error(robot: Robot, q: ArrayLike, pose: ToolPose) -> tuple[float, float
 def task_jacobian(robot: Robot, pose: ToolPose, q: ArrayLike) -> NDArray[np.float64]:
     """The pose's frame Jacobian at θ: 6 × n in the frame (a full pose), 3 × n with world axes
     (a position); a step Δθ in its null space keeps the frame at the pose to first order."""
-    model, data = robot.model, robot.model.createData()
+    model, data = robot.model, robot.new_data()
     fid = robot.frame_id(pose.frame)
     pin.computeJointJacobians(model, data, robot.check_configuration(q))
     pin.updateFramePlacements(model, data)
@@ -136,7 +136,7 @@ def inverse_kinematics(
     ConfigurationError
         An unknown frame (the message lists the frames).
     """
-    model, data = robot.model, robot.model.createData()
+    model, data = robot.model, robot.new_data()
     fid = robot.frame_id(pose.frame)
     lim = robot.limits
     lower, upper = lim.sampling_box()

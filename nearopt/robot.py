@@ -505,6 +505,11 @@ class Robot:
         """The Pinocchio model (read it; do not modify it)."""
         return self._model
 
+    def new_data(self) -> pin.Data:
+        """A fresh Pinocchio data of the model: the work space of one caller at a time (a data
+        must not be shared between threads). Every part of nearopt gets its data here."""
+        return self._model.createData()
+
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, n={self.n}, joints={self.joint_names})"
 

@@ -272,7 +272,7 @@ class _Sampled:
 
 def _torques(robot: Robot, q: NDArray, qd: NDArray, qdd: NDArray) -> NDArray[np.float64]:
     """u = RNEA(θ, θ̇, θ̈) + D θ̇ at every sample, from Pinocchio directly."""
-    model, data = robot.model, robot.model.createData()
+    model, data = robot.model, robot.new_data()
     return np.array(
         [pin.rnea(model, data, *x) + robot.damping * x[1] for x in zip(q, qd, qdd, strict=True)]
     )
@@ -537,7 +537,7 @@ def _simulate(
     strong joint damping makes the dynamics stiff (xarm7: 10 times faster than an explicit
     Runge-Kutta method). Returns the simulated end state and the largest window defect.
     """
-    model, data, n = robot.model, robot.model.createData(), robot.n
+    model, data, n = robot.model, robot.new_data(), robot.n
 
     def rhs(tau: float, x: NDArray[np.float64]) -> NDArray[np.float64]:
         u = trajectory.torque(np.array([tau]))[0] - robot.damping * x[n:]

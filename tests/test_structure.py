@@ -138,6 +138,16 @@ def test_only_the_command_line_knows_argparse() -> None:
     assert importers <= {"nearopt.__main__"}, importers
 
 
+def test_only_the_robot_makes_pinocchio_data() -> None:
+    """Pinocchio's work spaces (pin.Data, one per caller and thread) come from Robot.new_data."""
+    makers = {
+        name
+        for name, path in read_structure().modules.items()
+        if "createData(" in path.read_text(encoding="utf-8")
+    }
+    assert makers == {"nearopt.robot"}, makers
+
+
 def test_the_reader_sees_a_cycle_and_a_private_import(tmp_path: Path) -> None:
     """The checks can fail: a package with a cycle and a private import is reported."""
     package = tmp_path / "nearopt"

@@ -193,7 +193,7 @@ class CollisionModel:
             geom.addCollisionPair(pin.CollisionPair(int(a), int(b)))
         self.seconds = 0.0
         """Time spent computing distances (all pairs at a configuration) so far [s]."""
-        self._data = model.createData()
+        self._data = robot.new_data()
         self._gdata = pin.GeometryData(geom)
         self._configure()
         if self_collision and pairs:  # MoveIt's "default" rule (kinova's, z1's SRDFs lack it)

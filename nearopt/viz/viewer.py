@@ -217,7 +217,7 @@ def _draw(
         raise ConfigurationError(f"fps must be a positive number, got {fps}")
     visual = robot.visual_model()
     paths = _load_visuals(vis, robot, visual)
-    model, data = robot.model, robot.model.createData()
+    model, data = robot.model, robot.new_data()
     gdata = pin.GeometryData(visual)
     frames = int(np.ceil(trajectory.duration * fps - 1e-9))
     q = trajectory(np.minimum(np.arange(frames + 1) / fps, trajectory.duration), 0)
