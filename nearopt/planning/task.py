@@ -32,7 +32,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -430,12 +430,64 @@ self_collision
         else str(targets.source),
     )
     collisions = collisions_for(robot, scene, margin, self_collision)
+    settings = dict(
+        method=method,
+        options=options,
+        grid=grid,
+        velocity_limits=velocity_limits,
+        position_limits=position_limits,
+        scene=collisions,
+    )
+    segments, interrupted = _plan_segments(
+        robot,
+        _stop_groups(records),
+        q0,
+        cost,
+        settings,
+        max_iterations,
+        optimise_goal,
+        callback,
+        t_start,
+        time_limit,
+    )
+    trajectory = ChainedTrajectory([s.trajectory for s in segments])
+    message = "; ".join(f"segment {k + 1}: {s.status}, {s.message}" for k, s in enumerate(segments))
+    return TaskResult(
+        robot=robot,
+        targets=records,
+        segments=tuple(segments),
+        trajectory=trajectory,
+        status=StopReason.INTERRUPTED if interrupted else _least_settled(segments),
+        message=message,
+        wall_time=time.perf_counter() - t_start,
+    )
+
+
+def _stop_groups(records: tuple[Target, ...]) -> list[list[Target]]:
+    """The targets as rest-to-rest segments: each group ends at a target stopped at."""
     groups: list[list[Target]] = [[]]
     for target in records:
         groups[-1].append(target)
         if target.stop:
             groups.append([])
-    groups = [g for g in groups if g]
+    return [g for g in groups if g]
+
+
+def _plan_segments(
+    robot: Robot,
+    groups: list[list[Target]],
+    q0: NDArray[np.float64],
+    cost: Cost,
+    settings: dict[str, Any],
+    max_iterations: int,
+    optimise_goal: bool,
+    callback: Callable[[int, Iteration], None] | None,
+    t_start: float,
+    time_limit: float,
+) -> tuple[list[PlanResult], bool]:
+    """Every segment planned from where the last one ended (its via-points passed through), the
+    time left shared by the segments still to plan; after a Ctrl-C the rest are timed on their
+    first paths. Returns the segments and whether it was interrupted."""
     segments: list[PlanResult] = []
     start = q0
     interrupted = False
@@ -449,13 +501,8 @@ self_collision
                 callback(k, entry)
 
         same = dict(
-            method=method,
-            options=options,
-            grid=grid,
+            **settings,
             time_limit=budget,
-            velocity_limits=velocity_limits,
-            position_limits=position_limits,
-            scene=collisions,
             optimise_goal=optimise_goal and k == len(groups) - 1,
             via=[t.goal for t in group[:-1]],
         )
@@ -478,17 +525,7 @@ self_collision
         interrupted = interrupted or segment.status == StopReason.INTERRUPTED
         segments.append(segment)
         start = segment.trajectory(segment.duration, 0)[0]
-    trajectory = ChainedTrajectory([s.trajectory for s in segments])
-    message = "; ".join(f"segment {k + 1}: {s.status}, {s.message}" for k, s in enumerate(segments))
-    return TaskResult(
-        robot=robot,
-        targets=records,
-        segments=tuple(segments),
-        trajectory=trajectory,
-        status=StopReason.INTERRUPTED if interrupted else _least_settled(segments),
-        message=message,
-        wall_time=time.perf_counter() - t_start,
-    )
+    return segments, interrupted
 
 
 def check_targets(
