@@ -326,20 +326,7 @@ def read_urdf(
     URDFError
         Naming the file, the element and what is wrong with it.
     """
-    if path.is_dir():
-        raise URDFError(f"{path} is a directory, not a URDF file", path=str(path))
-    if not path.is_file():
-        raise URDFError(f"URDF file not found: {path}", path=str(path))
-    try:
-        root = ET.parse(path).getroot()
-    except ET.ParseError as exc:
-        raise URDFError(f"malformed URDF {path}: {exc}", path=str(path)) from exc
-    except OSError as exc:
-        raise URDFError(f"cannot read URDF {path}: {exc}", path=str(path)) from exc
-    if root.tag != "robot":
-        raise URDFError(
-            f"{path} is not a URDF: its root element is <{root.tag}>, not <robot>", path=str(path)
-        )
+    root = _parse(path)
     joints = _check_tree(root, path)
     _check_numbers(root, path)
     unknown = [name for name in locked if name not in joints]
@@ -357,59 +344,107 @@ def read_urdf(
     _check_inertials(root, path, _moved_links(root, locked))
     continuous, no_effort = [], []
     for name, joint in joints.items():
-        jtype = joint.get("type")
-        if jtype in ("floating", "planar"):
-            raise URDFError(
-                f"joint {name!r} of {path} is of type {jtype!r}: a moving base is not "
-                "supported, nearopt plans for fixed-base arms",
-                path=str(path),
-            )
-        if jtype not in SUPPORTED_TYPES:
-            raise URDFError(
-                f"joint {name!r} of {path} has unsupported type {jtype!r} "
-                f"(supported: {', '.join(SUPPORTED_TYPES)})",
-                path=str(path),
-            )
-        mimic = joint.find("mimic")
-        if mimic is not None and jtype == "fixed":  # a fixed joint follows nothing
-            joint.remove(mimic)
-        elif mimic is not None and name not in locked:
-            raise URDFError(
-                f"joint {name!r} of {path} mimics joint {mimic.get('joint')!r}: mimic joints are "
-                "not supported; lock it (locked_joints=..., --lock) to plan for the rest of the "
-                "arm",
-                path=str(path),
-            )
-        if jtype == "fixed":
-            continue
-        axis = joint.find("axis")
-        if axis is not None and not any(_floats(axis.get("xyz", "1 0 0"), path, "axis")):
-            raise _error(path, f"joint {name!r} has the zero axis {axis.get('xyz')!r}")
-        limit = joint.find("limit")
-        if limit is None:
-            limit = ET.SubElement(joint, "limit")
-        for attr in ("effort", "velocity"):
-            if float(limit.get(attr, "0")) < 0.0:
-                raise _error(
-                    path,
-                    f"joint {name!r} has a negative {attr} limit "
-                    f"{limit.get(attr)}: limits are magnitudes",
-                )
-        if jtype == "continuous":
-            joint.set("type", "revolute")
-            limit.set("lower", "0")
-            limit.set("upper", "0")
-            continuous.append(name)
-        elif float(limit.get("lower", "0")) > float(limit.get("upper", "0")):
+        _check_joint(name, joint, path, locked, continuous, no_effort)
+    renamed = _rename_locked(root, joints, locked)
+    return ArmDescription(
+        name=root.get("name", path.stem),
+        xml=ET.tostring(root, encoding="unicode"),
+        continuous=tuple(continuous),
+        no_effort=tuple(no_effort),
+        locked=locked,
+        locked_in_xml=tuple(renamed.get(name, name) for name in locked),
+    )
+
+
+def _parse(path: Path) -> ET.Element:
+    """The URDF's root element, ``<robot>``."""
+    if path.is_dir():
+        raise URDFError(f"{path} is a directory, not a URDF file", path=str(path))
+    if not path.is_file():
+        raise URDFError(f"URDF file not found: {path}", path=str(path))
+    try:
+        root = ET.parse(path).getroot()
+    except ET.ParseError as exc:
+        raise URDFError(f"malformed URDF {path}: {exc}", path=str(path)) from exc
+    except OSError as exc:
+        raise URDFError(f"cannot read URDF {path}: {exc}", path=str(path)) from exc
+    if root.tag != "robot":
+        raise URDFError(
+            f"{path} is not a URDF: its root element is <{root.tag}>, not <robot>", path=str(path)
+        )
+    return root
+
+
+def _check_joint(
+    name: str,
+    joint: ET.Element,
+    path: Path,
+    locked: tuple[str, ...],
+    continuous: list[str],
+    no_effort: list[str],
+) -> None:
+    """Check one joint (type, mimic, axis, limits) and normalise its ``<limit>`` for Pinocchio
+    (a continuous joint becomes revolute without position limits: named in ``continuous``; a
+    moving joint without an effort limit is named in ``no_effort``)."""
+    jtype = joint.get("type")
+    if jtype in ("floating", "planar"):
+        raise URDFError(
+            f"joint {name!r} of {path} is of type {jtype!r}: a moving base is not "
+            "supported, nearopt plans for fixed-base arms",
+            path=str(path),
+        )
+    if jtype not in SUPPORTED_TYPES:
+        raise URDFError(
+            f"joint {name!r} of {path} has unsupported type {jtype!r} "
+            f"(supported: {', '.join(SUPPORTED_TYPES)})",
+            path=str(path),
+        )
+    mimic = joint.find("mimic")
+    if mimic is not None and jtype == "fixed":  # a fixed joint follows nothing
+        joint.remove(mimic)
+    elif mimic is not None and name not in locked:
+        raise URDFError(
+            f"joint {name!r} of {path} mimics joint {mimic.get('joint')!r}: mimic joints are "
+            "not supported; lock it (locked_joints=..., --lock) to plan for the rest of the "
+            "arm",
+            path=str(path),
+        )
+    if jtype == "fixed":
+        return
+    axis = joint.find("axis")
+    if axis is not None and not any(_floats(axis.get("xyz", "1 0 0"), path, "axis")):
+        raise _error(path, f"joint {name!r} has the zero axis {axis.get('xyz')!r}")
+    limit = joint.find("limit")
+    if limit is None:
+        limit = ET.SubElement(joint, "limit")
+    for attr in ("effort", "velocity"):
+        if float(limit.get(attr, "0")) < 0.0:
             raise _error(
                 path,
-                f"joint {name!r} has position limits lower {limit.get('lower')} > "
-                f"upper {limit.get('upper')}",
+                f"joint {name!r} has a negative {attr} limit "
+                f"{limit.get(attr)}: limits are magnitudes",
             )
-        if float(limit.get("effort", "0")) == 0.0 and name not in locked:
-            no_effort.append(name)
-        for attr in ("effort", "velocity", "lower", "upper"):
-            limit.set(attr, limit.get(attr, "0"))
+    if jtype == "continuous":
+        joint.set("type", "revolute")
+        limit.set("lower", "0")
+        limit.set("upper", "0")
+        continuous.append(name)
+    elif float(limit.get("lower", "0")) > float(limit.get("upper", "0")):
+        raise _error(
+            path,
+            f"joint {name!r} has position limits lower {limit.get('lower')} > "
+            f"upper {limit.get('upper')}",
+        )
+    if float(limit.get("effort", "0")) == 0.0 and name not in locked:
+        no_effort.append(name)
+    for attr in ("effort", "velocity", "lower", "upper"):
+        limit.set(attr, limit.get(attr, "0"))
+
+
+def _rename_locked(
+    root: ET.Element, joints: dict[str, ET.Element], locked: tuple[str, ...]
+) -> dict[str, str]:
+    """Rename the locked joints that share a link's name; returns the new names."""
     # Pinocchio mixes up a joint and a link of the same name when it removes the joint: a locked
     # joint is renamed first (it leaves the model anyway)
     links = {link.get("name") for link in root.findall("link")}
@@ -419,11 +454,4 @@ def read_urdf(
     for mimic in root.iter("mimic"):
         if mimic.get("joint") in renamed:
             mimic.set("joint", renamed[mimic.get("joint")])
-    return ArmDescription(
-        name=root.get("name", path.stem),
-        xml=ET.tostring(root, encoding="unicode"),
-        continuous=tuple(continuous),
-        no_effort=tuple(no_effort),
-        locked=locked,
-        locked_in_xml=tuple(renamed.get(name, name) for name in locked),
-    )
+    return renamed
