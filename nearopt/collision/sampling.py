@@ -142,6 +142,25 @@ def search_paths(
         When no collision-free path is found within the time limit (or no B-spline of up to
         8 K control points follows OMPL's within the margin).
     """
+    ob, og = _ompl()
+    margin = collisions.margin
+    clearance = margin + 0.02 if clearance is None else clearance
+    setup, checks = _ompl_setup(ob, og, collisions, q0, qe, clearance)
+    found = _search(
+        ob, setup, checks, collisions, q0, qe, control_points, breaks, time_limit, attempts
+    )
+    if not found:
+        raise CollisionError(
+            f"no collision-free path from the start to the goal found in {time_limit:.3g} s "
+            f"(OMPL RRT-Connect's share of the time limit, clearance {clearance * 1e3:.0f} mm; "
+            "the straight line collides)"
+        )
+    return found
+
+
+def _ompl() -> tuple[object, object]:
+    """OMPL's base and geometric modules, its log silenced and its generator seeded once per
+    process."""
     try:
         from ompl import base as ob
         from ompl import geometric as og
@@ -155,8 +174,21 @@ def search_paths(
         ou.setLogLevel(ou.LOG_NONE)
         ou.RNG.setSeed(OMPL_SEED)
         _seeded = True
+    return ob, og
+
+
+def _ompl_setup(
+    ob: object,
+    og: object,
+    collisions: CollisionModel,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    clearance: float,
+) -> tuple[object, list[int]]:
+    """RRT-Connect in the joints' box (the position limits, or ±π beyond the ends), its states
+    kept ``clearance`` from collision (the margin next to the ends), its motions certified;
+    returns the set-up and the counter of its checks."""
     margin = collisions.margin
-    clearance = margin + 0.02 if clearance is None else clearance
     robot = collisions.robot
     n = robot.n
     lim = robot.limits
@@ -209,6 +241,23 @@ def search_paths(
     goal[0:n] = [float(x) for x in qe]
     setup.setStartAndGoalStates(start, goal)
     setup.setPlanner(og.RRTConnect(info))
+    return setup, checks
+
+
+def _search(
+    ob: object,
+    setup: object,
+    checks: list[int],
+    collisions: CollisionModel,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    control_points: int,
+    breaks: NDArray[np.float64] | None,
+    time_limit: float,
+    attempts: int,
+) -> list[BSplinePath]:
+    """Up to ``attempts`` searches, each simplified and fitted by a certified B-spline."""
+    n = collisions.robot.n
     # Each search ends at its first solution or after SEARCH_CHECKS checks, and each
     # simplification after one pass: counted, not timed, so that the same request gives the same
     # paths however fast this process runs (a long-running one is slower). The wall-clock
@@ -238,12 +287,6 @@ def search_paths(
             if collisions.path_clearance(spline).certified:
                 found.append(spline)
                 break
-    if not found:
-        raise CollisionError(
-            f"no collision-free path from the start to the goal found in {time_limit:.3g} s "
-            f"(OMPL RRT-Connect's share of the time limit, clearance {clearance * 1e3:.0f} mm; "
-            "the straight line collides)"
-        )
     return found
 
 
