@@ -103,136 +103,27 @@ def solve_conic(
     big_n, nz = ds.size, ds.size - 1
     n_p = 0 if p_bounds is None else p_bounds[0].size
     n = torque[0].shape[0] // (2 * big_n)
-    iz, ip = 0, nz
-    ic = nz + n_p
-    it, ie = ic + nz, ic + nz + big_n
-    energy = bool(np.any(weights > 0))
-    iv = ie + big_n
-    nv = 0 if torque_limits is None else n * 2 * big_n
-    nx = iv + nv
-    seg = np.arange(big_n)
-    trip_r: list[NDArray[np.int64]] = []
-    trip_c: list[NDArray[np.int64]] = []
-    trip_v: list[NDArray[np.float64]] = []
-    rhs: list[NDArray[np.float64]] = []
-    row0 = 0
-
-    def put(r: NDArray, c: NDArray, v: NDArray) -> None:
-        trip_r.append(np.asarray(r, dtype=np.int64) + row0)
-        trip_c.append(np.asarray(c, dtype=np.int64))
-        trip_v.append(np.asarray(v, dtype=float))
-
-    # 1. linear rows (finite sides), z ≥ 0, z ≤ z_upper, p within its bounds: A x + s = rhs, s ≥ 0
-    # each row divided by its largest finite limit (or its largest coefficient where that is 0),
-    # as the kernel does: rows whose coefficients are ∝ 1/Δσ would otherwise set Clarabel's
-    # feasibility tolerance far above the limits' own scale
-    mat = rows.matrix.tocoo()
-    row_scale = np.maximum(
-        np.where(np.isfinite(rows.upper), np.abs(rows.upper), 0.0),
-        np.where(np.isfinite(rows.lower), np.abs(rows.lower), 0.0),
-    )
-    if mat.nnz:
-        largest = np.zeros(row_scale.size)
-        np.maximum.at(largest, mat.row, np.abs(mat.data))
-        row_scale = np.where(row_scale > 0.0, row_scale, largest)
-    row_scale = np.where(row_scale > 0.0, row_scale, 1.0)
-    count = 0
-    for sign, side in ((1.0, rows.upper), (-1.0, -rows.lower)):
-        finite = np.isfinite(side)
-        index = np.cumsum(finite) - 1  # row of each finite side among them
-        keep = finite[mat.row]
-        put(
-            count + index[mat.row[keep]],
-            mat.col[keep],
-            sign * mat.data[keep] / row_scale[mat.row[keep]],
-        )
-        rhs.append(side[finite] / row_scale[finite])
-        count += int(finite.sum())
-    put(count + np.arange(nz), iz + np.arange(nz), -np.ones(nz))
-    rhs.append(np.zeros(nz))
-    count += nz
-    finite = np.flatnonzero(np.isfinite(z_upper))
-    put(count + np.arange(finite.size), iz + finite, np.ones(finite.size))
-    rhs.append(z_upper[finite])
-    count += finite.size
-    bounded = [(ip, p_bounds)] if n_p else []
-    bounded += [(iv, torque_limits)] if nv else []
-    for first, (low, high) in bounded:
-        for sign, side in ((1.0, high), (-1.0, -low)):
-            finite = np.flatnonzero(np.isfinite(side))
-            put(count + np.arange(finite.size), first + finite, sign * np.ones(finite.size))
-            rhs.append(side[finite])
-            count += finite.size
-    cones: list[object] = [clarabel.NonnegativeConeT(count)]
-    row0 += count
-
-    # 2. c_k² ≤ b_k ⇔ ‖(2c_k, b_k − 1)‖ ≤ b_k + 1, knots 1 … N−1
-    kn = np.arange(nz)
-    put(3 * kn, iz + kn, -np.ones(nz))
-    put(3 * kn + 1, ic + kn, -2.0 * np.ones(nz))
-    put(3 * kn + 2, iz + kn, -np.ones(nz))
-    rhs.append(np.tile([1.0, 0.0, -1.0], nz))
-    cones += [clarabel.SecondOrderConeT(3)] * nz
-    row0 += 3 * nz
-
-    # y_k = c_k + c_{k+1} (c_0 = c_N = 0): the c columns of segment k
-    y_seg = np.concatenate([seg[seg >= 1], seg[seg <= big_n - 2]])
-    y_col = np.concatenate([seg[seg >= 1] - 1, seg[seg <= big_n - 2]]) + ic
-
-    def cone_xy(width: int, var: int) -> None:
-        """Rows 0 and last of per-segment cones ‖(…, x − y)‖ ≤ x + y with x = var_k."""
-        put(width * seg, var + seg, -np.ones(big_n))
-        put(width * y_seg, y_col, -np.ones(y_seg.size))
-        put(width * seg + width - 1, var + seg, -np.ones(big_n))
-        put(width * y_seg + width - 1, y_col, np.ones(y_seg.size))
-
-    # 3. t_k y_k ≥ 2Δσ_k ⇔ ‖(2√(2Δσ_k), t_k − y_k)‖ ≤ t_k + y_k
-    cone_xy(3, it)
-    rhs.append(np.column_stack([np.zeros(big_n), 2.0 * np.sqrt(2.0 * ds), np.zeros(big_n)]).ravel())
-    cones += [clarabel.SecondOrderConeT(3)] * big_n
-    row0 += 3 * big_n
-
-    # 4. e_k y_k ≥ Δσ_k Σ w (u_{k+}² + u_{(k+1)-}²) ⇔ ‖(2v, e_k − y_k)‖ ≤ e_k + y_k, v = √(Δσ w) u
-    q_vec = np.zeros(nx)
-    q_vec[it : it + big_n] = 1.0
-    if energy:
-        width = 2 + 2 * n
-        cone_xy(width, ie)
-        joint_all, r_all = np.divmod(np.arange(n * 2 * big_n), 2 * big_n)
-        k_all = np.where(r_all < big_n, r_all, r_all - big_n)
-        slot_all = np.where(r_all < big_n, joint_all, n + joint_all)
-        scale_all = 2.0 * np.sqrt(ds[k_all] * weights[joint_all])
-        e_rhs = np.zeros((big_n, width))
-        if nv:
-            put(width * k_all + 1 + slot_all, iv + np.arange(nv), -scale_all)
-        else:
-            tt = sp.coo_matrix(torque[0])
-            joint, r = np.divmod(tt.row, 2 * big_n)
-            k_of = np.where(r < big_n, r, r - big_n)
-            slot = np.where(r < big_n, joint, n + joint)
-            put(
-                width * k_of + 1 + slot, tt.col, -2.0 * np.sqrt(ds[k_of] * weights[joint]) * tt.data
-            )
-            e_rhs[k_all, 1 + slot_all] = scale_all * torque[1]
-        rhs.append(e_rhs.ravel())
-        cones += [clarabel.SecondOrderConeT(width)] * big_n
-        row0 += width * big_n
-        q_vec[ie : ie + big_n] = 1.0
+    at = _Columns(nz, n_p, big_n, 0 if torque_limits is None else n * 2 * big_n)
+    pb = _Builder(big_n)
+    _linear_block(pb, clarabel, at, rows, z_upper, p_bounds, torque_limits)
+    _root_block(pb, clarabel, at)
+    _time_block(pb, clarabel, at, ds)
+    q_vec = np.zeros(at.nx)
+    q_vec[at.it : at.it + big_n] = 1.0
+    if bool(np.any(weights > 0)):
+        _energy_block(pb, clarabel, at, ds, weights, torque, n)
+        q_vec[at.ie : at.ie + big_n] = 1.0
     else:  # no energy: pin e = 0
-        put(np.arange(big_n), ie + seg, np.ones(big_n))
-        rhs.append(np.zeros(big_n))
-        cones.append(clarabel.ZeroConeT(big_n))
-        row0 += big_n
-    if nv:  # v = T (z, p) + u0 ⇔ T (z, p) − v = −u0
+        pb.put(np.arange(big_n), at.ie + pb.seg, np.ones(big_n))
+        pb.close(np.zeros(big_n), [clarabel.ZeroConeT(big_n)], big_n)
+    if at.nv:  # v = T (z, p) + u0 ⇔ T (z, p) − v = −u0
         tt = sp.coo_matrix(torque[0])
-        put(tt.row, tt.col, tt.data)
-        put(np.arange(nv), iv + np.arange(nv), -np.ones(nv))
-        rhs.append(-np.asarray(torque[1], dtype=float))
-        cones.append(clarabel.ZeroConeT(nv))
-        row0 += nv
-    a_all = sp.csc_matrix(
-        (np.concatenate(trip_v), (np.concatenate(trip_r), np.concatenate(trip_c))), shape=(row0, nx)
-    )
+        pb.put(tt.row, tt.col, tt.data)
+        pb.put(np.arange(at.nv), at.iv + np.arange(at.nv), -np.ones(at.nv))
+        pb.close(-np.asarray(torque[1], dtype=float), [clarabel.ZeroConeT(at.nv)], at.nv)
+    a_all = pb.matrix(at.nx)
+    nx, iz, ip, nz = at.nx, at.iz, at.ip, at.nz
+    rhs, cones = pb.rhs, pb.cones
     p_mat = sp.csc_matrix((nx, nx))
     settings = clarabel.DefaultSettings()
     settings.verbose = False
@@ -250,3 +141,172 @@ def solve_conic(
         status=sol.status,
         iterations=int(sol.iterations),
     )
+
+
+class _Columns:
+    """Where each variable lies in x = (z, p, c, t, e, v): c = √b at the free knots, t and e
+    the segments' time and energy bounds, v the torque samples when they are variables."""
+
+    def __init__(self, nz: int, n_p: int, big_n: int, nv: int) -> None:
+        self.nz, self.n_p, self.nv = nz, n_p, nv
+        self.iz, self.ip = 0, nz
+        self.ic = nz + n_p
+        self.it = self.ic + nz
+        self.ie = self.it + big_n
+        self.iv = self.ie + big_n
+        self.nx = self.iv + nv
+
+
+class _Builder:
+    """Clarabel's A x + s = b, s in the cones, built block after block: triplets, right-hand
+    sides and cones in order."""
+
+    def __init__(self, big_n: int) -> None:
+        self.trip_r: list[NDArray[np.int64]] = []
+        self.trip_c: list[NDArray[np.int64]] = []
+        self.trip_v: list[NDArray[np.float64]] = []
+        self.rhs: list[NDArray[np.float64]] = []
+        self.cones: list[object] = []
+        self.row0 = 0
+        self.seg = np.arange(big_n)
+        seg = self.seg
+        # y_k = c_k + c_{k+1} (c_0 = c_N = 0): the c columns of segment k (offset by ic)
+        self.y_seg = np.concatenate([seg[seg >= 1], seg[seg <= big_n - 2]])
+        self.y_col = np.concatenate([seg[seg >= 1] - 1, seg[seg <= big_n - 2]])
+
+    def put(self, r: NDArray, c: NDArray, v: NDArray) -> None:
+        """Entries of the current block (rows counted from its first)."""
+        self.trip_r.append(np.asarray(r, dtype=np.int64) + self.row0)
+        self.trip_c.append(np.asarray(c, dtype=np.int64))
+        self.trip_v.append(np.asarray(v, dtype=float))
+
+    def close(self, rhs: NDArray, cones: list[object], rows: int) -> None:
+        """End the current block: its right-hand side, its cones, its number of rows."""
+        self.rhs.append(rhs)
+        self.cones += cones
+        self.row0 += rows
+
+    def cone_xy(self, width: int, var: int, ic: int) -> None:
+        """Rows 0 and last of per-segment cones ‖(…, x − y)‖ ≤ x + y with x = var_k."""
+        big_n = self.seg.size
+        self.put(width * self.seg, var + self.seg, -np.ones(big_n))
+        self.put(width * self.y_seg, self.y_col + ic, -np.ones(self.y_seg.size))
+        self.put(width * self.seg + width - 1, var + self.seg, -np.ones(big_n))
+        self.put(width * self.y_seg + width - 1, self.y_col + ic, np.ones(self.y_seg.size))
+
+    def matrix(self, nx: int) -> sp.csc_matrix:
+        return sp.csc_matrix(
+            (
+                np.concatenate(self.trip_v),
+                (np.concatenate(self.trip_r), np.concatenate(self.trip_c)),
+            ),
+            shape=(self.row0, nx),
+        )
+
+
+def _linear_block(
+    pb: _Builder,
+    clarabel: object,
+    at: _Columns,
+    rows: LinearRows,
+    z_upper: NDArray[np.float64],
+    p_bounds: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+    torque_limits: tuple[NDArray[np.float64], NDArray[np.float64]] | None,
+) -> None:
+    """1. linear rows (finite sides), z ≥ 0, z ≤ z_upper, p (and v) within their bounds: each
+    row divided by its largest finite limit (or its largest coefficient where that is 0), as the
+    kernel does: rows whose coefficients are ∝ 1/Δσ would otherwise set Clarabel's feasibility
+    tolerance far above the limits' own scale."""
+    nz, iz = at.nz, at.iz
+    rhs: list[NDArray[np.float64]] = []
+    mat = rows.matrix.tocoo()
+    row_scale = np.maximum(
+        np.where(np.isfinite(rows.upper), np.abs(rows.upper), 0.0),
+        np.where(np.isfinite(rows.lower), np.abs(rows.lower), 0.0),
+    )
+    if mat.nnz:
+        largest = np.zeros(row_scale.size)
+        np.maximum.at(largest, mat.row, np.abs(mat.data))
+        row_scale = np.where(row_scale > 0.0, row_scale, largest)
+    row_scale = np.where(row_scale > 0.0, row_scale, 1.0)
+    count = 0
+    for sign, side in ((1.0, rows.upper), (-1.0, -rows.lower)):
+        finite = np.isfinite(side)
+        index = np.cumsum(finite) - 1  # row of each finite side among them
+        keep = finite[mat.row]
+        pb.put(
+            count + index[mat.row[keep]],
+            mat.col[keep],
+            sign * mat.data[keep] / row_scale[mat.row[keep]],
+        )
+        rhs.append(side[finite] / row_scale[finite])
+        count += int(finite.sum())
+    pb.put(count + np.arange(nz), iz + np.arange(nz), -np.ones(nz))
+    rhs.append(np.zeros(nz))
+    count += nz
+    finite = np.flatnonzero(np.isfinite(z_upper))
+    pb.put(count + np.arange(finite.size), iz + finite, np.ones(finite.size))
+    rhs.append(z_upper[finite])
+    count += finite.size
+    bounded = [(at.ip, p_bounds)] if at.n_p else []
+    bounded += [(at.iv, torque_limits)] if at.nv else []
+    for first, (low, high) in bounded:
+        for sign, side in ((1.0, high), (-1.0, -low)):
+            finite = np.flatnonzero(np.isfinite(side))
+            pb.put(count + np.arange(finite.size), first + finite, sign * np.ones(finite.size))
+            rhs.append(side[finite])
+            count += finite.size
+    pb.rhs += rhs[:-1]
+    pb.close(rhs[-1], [clarabel.NonnegativeConeT(count)], count)
+
+
+def _root_block(pb: _Builder, clarabel: object, at: _Columns) -> None:
+    """2. c_k² ≤ b_k ⇔ ‖(2c_k, b_k − 1)‖ ≤ b_k + 1, knots 1 … N−1."""
+    nz = at.nz
+    kn = np.arange(nz)
+    pb.put(3 * kn, at.iz + kn, -np.ones(nz))
+    pb.put(3 * kn + 1, at.ic + kn, -2.0 * np.ones(nz))
+    pb.put(3 * kn + 2, at.iz + kn, -np.ones(nz))
+    pb.close(np.tile([1.0, 0.0, -1.0], nz), [clarabel.SecondOrderConeT(3)] * nz, 3 * nz)
+
+
+def _time_block(pb: _Builder, clarabel: object, at: _Columns, ds: NDArray[np.float64]) -> None:
+    """3. t_k y_k ≥ 2Δσ_k ⇔ ‖(2√(2Δσ_k), t_k − y_k)‖ ≤ t_k + y_k."""
+    big_n = ds.size
+    pb.cone_xy(3, at.it, at.ic)
+    pb.close(
+        np.column_stack([np.zeros(big_n), 2.0 * np.sqrt(2.0 * ds), np.zeros(big_n)]).ravel(),
+        [clarabel.SecondOrderConeT(3)] * big_n,
+        3 * big_n,
+    )
+
+
+def _energy_block(
+    pb: _Builder,
+    clarabel: object,
+    at: _Columns,
+    ds: NDArray[np.float64],
+    weights: NDArray[np.float64],
+    torque: tuple[sp.spmatrix, NDArray[np.float64]],
+    n: int,
+) -> None:
+    """4. e_k y_k ≥ Δσ_k Σ w (u_{k+}² + u_{(k+1)-}²) ⇔ ‖(2v, e_k − y_k)‖ ≤ e_k + y_k,
+    v = √(Δσ w) u."""
+    big_n, nv = ds.size, at.nv
+    width = 2 + 2 * n
+    pb.cone_xy(width, at.ie, at.ic)
+    joint_all, r_all = np.divmod(np.arange(n * 2 * big_n), 2 * big_n)
+    k_all = np.where(r_all < big_n, r_all, r_all - big_n)
+    slot_all = np.where(r_all < big_n, joint_all, n + joint_all)
+    scale_all = 2.0 * np.sqrt(ds[k_all] * weights[joint_all])
+    e_rhs = np.zeros((big_n, width))
+    if nv:
+        pb.put(width * k_all + 1 + slot_all, at.iv + np.arange(nv), -scale_all)
+    else:
+        tt = sp.coo_matrix(torque[0])
+        joint, r = np.divmod(tt.row, 2 * big_n)
+        k_of = np.where(r < big_n, r, r - big_n)
+        slot = np.where(r < big_n, joint, n + joint)
+        pb.put(width * k_of + 1 + slot, tt.col, -2.0 * np.sqrt(ds[k_of] * weights[joint]) * tt.data)
+        e_rhs[k_all, 1 + slot_all] = scale_all * torque[1]
+    pb.close(e_rhs.ravel(), [clarabel.SecondOrderConeT(width)] * big_n, width * big_n)
