@@ -16,6 +16,7 @@ from .records import (
     PaperOptions,
     Plan,
     PlanResult,
+    Run,
     SCPOptions,
     StopReason,
 )
@@ -38,6 +39,7 @@ __all__ = [
     "MethodOutcome",
     "PlanResult",
     "Plan",
+    "Run",
     "PathBasis",
     "path_basis",
     "row_path_jacobian",

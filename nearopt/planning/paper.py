@@ -30,8 +30,6 @@ which stage 1 then re-times from rest to rest.
 
 from __future__ import annotations
 
-import time
-from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -40,7 +38,7 @@ from scipy.integrate import solve_bvp, solve_ivp
 from ..errors import InfeasiblePathError, SolverError
 from ..path import Path, SplinePath
 from ..timing import TimingResult, optimal_timing
-from .records import Iteration, MethodOutcome, PaperOptions, StopReason
+from .records import MethodOutcome, PaperOptions, Run, StopReason
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -184,10 +182,7 @@ def paper_iterations(
     velocity_limits: bool,
     position_limits: bool,
     options: PaperOptions,
-    max_iterations: int,
-    deadline: float,
-    t_start: float,
-    accept: Callable[[Iteration, TimingResult], None],
+    run: Run,
 ) -> MethodOutcome:
     """Section 6's loop from the straight line, with α and Δt found by a search.
 
@@ -206,9 +201,9 @@ def paper_iterations(
     lim = robot.limits
     alpha, delta_t, trials = options.alpha, options.delta_t, options.trials
     evaluations = 0
-    reason, message = StopReason.ITERATION_LIMIT, f"{max_iterations} iterations"
-    for index in range(1, max_iterations + 1):
-        if time.perf_counter() > deadline:
+    reason, message = StopReason.ITERATION_LIMIT, f"{run.max_iterations} iterations"
+    for index in range(1, run.max_iterations + 1):
+        if run.out_of_time():
             reason, message = StopReason.TIME_LIMIT, "the time limit was reached"
             break
         best: tuple[TimingResult, Path] | None = None
@@ -252,8 +247,7 @@ def paper_iterations(
             break
         gain = current.objective - best[0].objective
         current, path = best
-        wall = time.perf_counter() - t_start
-        accept(Iteration(index, current.objective, alpha, current.duration, wall, path), current)
+        run.report(index, current, alpha, path)
         if gain < options.tolerance * current.objective:
             reason = StopReason.CONVERGED
             message = f"converged: J changed by less than {options.tolerance:g} relative"

@@ -46,6 +46,7 @@ from .records import (
     MethodOutcome,
     PaperOptions,
     PlanResult,
+    Run,
     SCPOptions,
     StopReason,
 )
@@ -426,10 +427,7 @@ def _improve(
         velocity_limits=velocity_limits,
         position_limits=position_limits,
         options=options,
-        max_iterations=max_iterations,
-        deadline=deadline,
-        t_start=t_start,
-        accept=accept,
+        run=Run(max_iterations, deadline, t_start, accept),
     )
     if max_iterations == 0 or method == Method.PAPER:
         accept(
@@ -653,14 +651,16 @@ def _free_goal(
 ) -> MethodOutcome:
     """Stage 2 continued from ``first`` with θe free along the goal pose; its iterates follow
     the first run's in the history (its iterate 0, the same path, is not repeated)."""
-    accept = common["accept"]
+    run: Run = common["run"]  # type: ignore[assignment]
     offset = len(history) - 1
 
     def follow(entry: Iteration, timing: TimingResult) -> None:
         if entry.index > 0:
-            accept(replace(entry, index=entry.index + offset), timing)  # type: ignore[operator]
+            run.accept(replace(entry, index=entry.index + offset), timing)
 
-    options = dict(common, accept=follow, max_iterations=int(common["max_iterations"]) - offset)  # type: ignore[call-overload]
+    options = dict(
+        common, run=replace(run, accept=follow, max_iterations=run.max_iterations - offset)
+    )
     second = sequential_convex(
         robot,
         q0,
@@ -708,10 +708,7 @@ def _screen(
                 velocity_limits=velocity_limits,
                 position_limits=position_limits,
                 options=options,
-                max_iterations=SCREENING,
-                deadline=deadline,
-                t_start=time.perf_counter(),
-                accept=lambda *_: None,
+                run=Run(SCREENING, deadline, time.perf_counter(), lambda *_: None),
                 collisions=collisions,
                 start=candidate,
             )

@@ -6,6 +6,8 @@ imports from them.
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from enum import StrEnum
 from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
@@ -329,3 +331,43 @@ class Plan(Protocol):
 
     @property
     def iterations(self) -> int: ...
+
+
+@dataclass(frozen=True)
+class Run:
+    """A stage-2 loop's budget and where its iterates go (both loops take one).
+
+    Attributes
+    ----------
+    max_iterations
+        Accepted iterates at most.
+    deadline
+        ``time.perf_counter()`` value after which no new iteration starts [s].
+    t_start
+        When planning started (for the iterates' wall times) [s].
+    accept
+        Called with every accepted iterate and its timing, iterate 0 first.
+    """
+
+    max_iterations: int
+    deadline: float
+    t_start: float
+    accept: Callable[[Iteration, TimingResult], None]
+
+    def out_of_time(self) -> bool:
+        """Whether the deadline has passed."""
+        return time.perf_counter() > self.deadline
+
+    def report(self, index: int, timing: TimingResult, step: float | None, path: Path) -> None:
+        """Accept iterate ``index``: its J (the discretised objective), step, t_e, wall time."""
+        self.accept(
+            Iteration(
+                index,
+                timing.objective,
+                step,
+                timing.duration,
+                time.perf_counter() - self.t_start,
+                path,
+            ),
+            timing,
+        )

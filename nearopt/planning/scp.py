@@ -32,7 +32,6 @@ iteration / time budget.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
@@ -46,7 +45,7 @@ from ..kinematics import ToolPose, inverse_kinematics, task_jacobian
 from ..path import BSplinePath
 from ..timing import Discretisation, LinearRows, is_solved, optimal_timing, solve_conic
 from .linearisation import PathBasis, path_basis, row_path_jacobian
-from .records import Iteration, MethodOutcome, SCPOptions, StopReason
+from .records import MethodOutcome, Run, SCPOptions, StopReason
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -69,10 +68,7 @@ def sequential_convex(
     velocity_limits: bool,
     position_limits: bool,
     options: SCPOptions,
-    max_iterations: int,
-    deadline: float,
-    t_start: float,
-    accept: Callable[[Iteration, TimingResult], None],
+    run: Run,
     collisions: CollisionModel | None = None,
     start: BSplinePath | None = None,
     goal: ToolPose | None = None,
@@ -96,14 +92,9 @@ def sequential_convex(
         Which limits hold (position limits bound the control points).
     options
         The method's options.
-    max_iterations
-        Accepted iterates at most.
-    deadline
-        ``time.perf_counter()`` value after which no new iteration starts [s].
-    t_start
-        When planning started (for the iterates' wall times) [s].
-    accept
-        Called with every accepted iterate and its timing, the straight line (iterate 0) first.
+    run
+        The budget (iterations, deadline) and where the accepted iterates go (the first path
+        as iterate 0 first).
     collisions
         Pairs of bodies kept apart by the margin along the whole path (see
         :func:`collision_rows`), or None.
@@ -155,15 +146,12 @@ def sequential_convex(
     p = start.control_points[1 : -1 if goal is None else None].ravel()
     timing = time_it(p)
     evaluations, index, small, failures = 1, 0, 0, 0
-    accept(
-        Iteration(0, timing.objective, None, timing.duration, time.perf_counter() - t_start, start),
-        timing,
-    )
+    run.report(0, timing, None, start)
     basis = None
     radius = options.trust_radius
-    reason, message = StopReason.ITERATION_LIMIT, f"{max_iterations} iterations"
-    while index < max_iterations:
-        if time.perf_counter() > deadline:
+    reason, message = StopReason.ITERATION_LIMIT, f"{run.max_iterations} iterations"
+    while index < run.max_iterations:
+        if run.out_of_time():
             reason, message = StopReason.TIME_LIMIT, "the time limit was reached"
             break
         disc = Discretisation(timing.problem)
@@ -208,17 +196,7 @@ def sequential_convex(
         if gain > 0.0:
             p, timing = p_trial, trial
             index += 1
-            accept(
-                Iteration(
-                    index,
-                    timing.objective,
-                    float(np.max(np.abs(dp))),
-                    timing.duration,
-                    time.perf_counter() - t_start,
-                    timing.trajectory.path,
-                ),
-                timing,
-            )
+            run.report(index, timing, float(np.max(np.abs(dp))), timing.trajectory.path)
             if ratio > 0.75 and boundary:
                 radius *= 2.0
             elif ratio < 0.25:
