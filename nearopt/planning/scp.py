@@ -112,13 +112,8 @@ def sequential_convex(
     weights = cost.torque_weights(robot.n) if isinstance(cost, TorqueCost) else None
     if weights is None:
         raise SolverError("sequential convex programming needs f0 = 1 + Σ w u² (a TorqueCost)")
-    n, k_count = robot.n, options.control_points
-    if start is not None:
-        k_count = start.control_points.shape[0] - 2
-        breaks = start.knots[4:-4] if k_count > 2 else None
-    else:
-        breaks = knot_breaks(options, k_count)
-        start = BSplinePath.line(q0, qe, k_count, breaks)
+    n = robot.n
+    start, k_count, breaks = _first_iterate(options, q0, qe, start)
     ends = start.control_points[[0, -1]]
     iterate_grid = min(grid, max(options.grid, 4 * k_count))  # ≥ 4 segments per control point
     scale, lower, upper = _trust_scale(robot, q0, qe, k_count, goal is not None, position_limits)
@@ -127,21 +122,7 @@ def sequential_convex(
         end = ends[1:] if goal is None else p[-n:][None, :]
         return BSplinePath(np.vstack([ends[:1], p[: k_count * n].reshape(k_count, n), end]), breaks)
 
-    def time_it(
-        p: NDArray[np.float64],
-        like: TimingResult | None = None,
-        guess: NDArray[np.float64] | None = None,
-        on: int = iterate_grid,
-    ) -> TimingResult:
-        return optimal_timing(
-            robot,
-            path_of(p),
-            cost,
-            grid=on,
-            velocity_limits=velocity_limits,
-            guess=guess,
-            margins=None if like is None else like.problem,
-        )
+    time_it = _timer(robot, cost, velocity_limits, path_of, iterate_grid)
 
     p = start.control_points[1 : -1 if goal is None else None].ravel()
     timing = time_it(p)
@@ -173,11 +154,7 @@ def sequential_convex(
         failures = 0
         dp, predicted, z_model = step
         if j0 - predicted <= options.tolerance * abs(j0):
-            reason = StopReason.CONVERGED
-            message = (
-                f"converged: the convex model finds no path that lowers J by more than "
-                f"{options.tolerance:g} relative"
-            )
+            reason, message = StopReason.CONVERGED, _converged("model", options)
             break
         guess = disc.b(z_model)  # stage 1 of the trial starts from the model's timing
         p_trial, trial, timed = _try_step(
@@ -193,30 +170,17 @@ def sequential_convex(
         ratio = gain / (j0 - predicted)
         reach = float(np.max(np.abs(dp) / scale))  # the step's length, as a fraction of scale
         boundary = reach > 0.9 * radius
+        radius = _new_radius(radius, gain, ratio, reach, boundary)
         if gain > 0.0:
             p, timing = p_trial, trial
             index += 1
             run.report(index, timing, float(np.max(np.abs(dp))), timing.trajectory.path)
-            if ratio > 0.75 and boundary:
-                radius *= 2.0
-            elif ratio < 0.25:
-                radius = 0.5 * reach
             small = small + 1 if gain < options.tolerance * abs(j0) else 0
             if small == 3:
-                reason = StopReason.CONVERGED
-                message = (
-                    f"converged: J changed by less than {options.tolerance:g} relative "
-                    "in each of the last 3 iterations"
-                )
+                reason, message = StopReason.CONVERGED, _converged("small", options)
                 break
-        else:
-            radius = 0.25 * reach
         if radius < options.min_trust_radius:
-            reason = StopReason.CONVERGED
-            message = (
-                f"converged: no step longer than {options.min_trust_radius:g} of the "
-                "joints' scale lowers J"
-            )
+            reason, message = StopReason.CONVERGED, _converged("radius", options)
             break
     if iterate_grid < grid:  # the returned path on the plan's own grid
         timing, message, timed = _on_plan_grid(
@@ -224,6 +188,81 @@ def sequential_convex(
         )
         evaluations += timed
     return MethodOutcome(timing, reason, message, evaluations)
+
+
+def _first_iterate(
+    options: SCPOptions,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    start: BSplinePath | None,
+) -> tuple[BSplinePath, int, NDArray[np.float64] | None]:
+    """The first iterate (``start``, or the straight line as a B-spline), its interior control
+    points' count and its interior knots."""
+    if start is not None:
+        k_count = start.control_points.shape[0] - 2
+        return start, k_count, start.knots[4:-4] if k_count > 2 else None
+    k_count = options.control_points
+    breaks = knot_breaks(options, k_count)
+    return BSplinePath.line(q0, qe, k_count, breaks), k_count, breaks
+
+
+def _timer(
+    robot: Robot,
+    cost: Cost,
+    velocity_limits: bool,
+    path_of: Callable[[NDArray[np.float64]], BSplinePath],
+    iterate_grid: int,
+) -> Callable[..., TimingResult]:
+    """Stage 1 of the iterate with control points p: on the iterate grid (or ``on``), from the
+    margins of a close timing (``like``) and a guess of b."""
+
+    def time_it(
+        p: NDArray[np.float64],
+        like: TimingResult | None = None,
+        guess: NDArray[np.float64] | None = None,
+        on: int = iterate_grid,
+    ) -> TimingResult:
+        return optimal_timing(
+            robot,
+            path_of(p),
+            cost,
+            grid=on,
+            velocity_limits=velocity_limits,
+            guess=guess,
+            margins=None if like is None else like.problem,
+        )
+
+    return time_it
+
+
+def _new_radius(radius: float, gain: float, ratio: float, reach: float, boundary: bool) -> float:
+    """The trust region after a step: doubled after one that did as the model predicted at its
+    boundary, cut to half its length after a poor one, to a quarter after a rejected one."""
+    if gain > 0.0:
+        if ratio > 0.75 and boundary:
+            return radius * 2.0
+        if ratio < 0.25:
+            return 0.5 * reach
+        return radius
+    return 0.25 * reach
+
+
+def _converged(why: str, options: SCPOptions) -> str:
+    """The message of a converged run: the model finds no gain, J stopped changing, or no step
+    of the trust region's smallest size lowers J."""
+    if why == "model":
+        return (
+            f"converged: the convex model finds no path that lowers J by more than "
+            f"{options.tolerance:g} relative"
+        )
+    if why == "small":
+        return (
+            f"converged: J changed by less than {options.tolerance:g} relative "
+            "in each of the last 3 iterations"
+        )
+    return (
+        f"converged: no step longer than {options.min_trust_radius:g} of the joints' scale lowers J"
+    )
 
 
 def _trust_scale(
