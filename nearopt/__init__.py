@@ -40,7 +40,6 @@ from .errors import (
     UnreachablePoseError,
     URDFError,
 )
-from .kinematics import ToolPose, inverse_kinematics
 from .path import BSplinePath, Path, SplinePath, StraightPath
 from .planning import (
     Iteration,
@@ -57,6 +56,7 @@ from .planning import (
     plan_task,
 )
 from .robot import JointLimits, PathCoefficients, Robot
+from .robot.kinematics import ToolPose, inverse_kinematics
 from .timing import TimingResult, optimal_timing
 from .trajectory import ChainedTrajectory, Samples, Trajectory
 from .verify import VerificationError, VerificationReport, Waypoint, verify

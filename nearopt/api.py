@@ -26,10 +26,10 @@ import numpy as np
 from .collision import Scene
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, SamplingWarning
-from .kinematics import ToolPose
 from .planning import METHODS, Iteration, PlanResult, Task, TaskResult, plan, plan_task
 from .planning.task import check_targets
 from .robot import Robot
+from .robot.kinematics import ToolPose
 from .validate import MAX_RATE, MAX_SAMPLES, check_rate, check_samples
 from .verify import VerificationReport, verify
 

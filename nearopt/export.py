@@ -16,9 +16,9 @@ from pathlib import Path
 import numpy as np
 
 from .errors import SamplingWarning
-from .kinematics import ToolPose
 from .outputs import write_atomically
 from .planning import Plan, TaskResult
+from .robot.kinematics import ToolPose
 
 __all__ = [
     "check_sampling",

@@ -24,8 +24,8 @@ if TYPE_CHECKING:
 
     from .collision import CollisionModel
     from .cost import Cost
-    from .kinematics import ToolPose
     from .robot import Robot
+    from .robot.kinematics import ToolPose
     from .trajectory import Motion, Trajectory
 
 __all__ = ["Check", "VerificationReport", "VerificationError", "Waypoint", "Tolerances", "verify"]
@@ -355,7 +355,7 @@ def _end_check(
 
 
 def _goal_pose_check(robot: Robot, motion: _Sampled, goal_pose: ToolPose, tol: Tolerances) -> Check:
-    from .kinematics import pose_error
+    from .robot.kinematics import pose_error
 
     distance, angle = pose_error(robot, motion.q[-1], goal_pose)
     return Check(
@@ -455,7 +455,7 @@ def _check_waypoints(
     tolerance: float,
 ) -> None:
     """Append the waypoint checks: configuration, pose and rest at each waypoint's time."""
-    from .kinematics import pose_error
+    from .robot.kinematics import pose_error
 
     names = list(robot.joint_names)
     t = np.array([w.time for w in waypoints], dtype=float)

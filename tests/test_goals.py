@@ -15,7 +15,7 @@ from console import run_cli
 
 import nearopt
 from nearopt import ToolPose, UnreachablePoseError, inverse_kinematics
-from nearopt.kinematics import pose_error
+from nearopt.robot.kinematics import pose_error
 
 
 def pose_of(robot: nearopt.Robot, q: np.ndarray, frame: str | None = None) -> ToolPose:

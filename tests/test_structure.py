@@ -145,7 +145,7 @@ def test_only_the_robot_makes_pinocchio_data() -> None:
         for name, path in read_structure().modules.items()
         if "createData(" in path.read_text(encoding="utf-8")
     }
-    assert makers == {"nearopt.robot"}, makers
+    assert makers == {"nearopt.robot.dynamics"}, makers
 
 
 def test_the_reader_sees_a_cycle_and_a_private_import(tmp_path: Path) -> None:

@@ -18,7 +18,7 @@ from console import run_cli
 
 import nearopt
 from nearopt import ChainedTrajectory, Target, Task, TaskError, ToolPose, Waypoint
-from nearopt.kinematics import pose_error
+from nearopt.robot.kinematics import pose_error
 
 ROOT = Path(__file__).resolve().parents[1]
 UR5_START = np.array([-0.8, -1.2, 1.2, -1.5, -1.57, 0.0])

@@ -35,9 +35,9 @@ from ..errors import (
     SolverError,
     UnreachablePoseError,
 )
-from ..kinematics import ToolPose, inverse_kinematics
 from ..path import BSplinePath, Path, StraightPath
 from ..robot import Robot
+from ..robot.kinematics import ToolPose, inverse_kinematics
 from ..timing import MAX_GRID, TimingResult, optimal_timing
 from .paper import paper_iterations
 from .records import (
@@ -93,7 +93,7 @@ def plan(
     q0, qe
         Start and goal configurations θ0, θe [rad or m], shape (n,); the goal may be a
         :class:`~nearopt.ToolPose` (a placement of a frame), reached by inverse kinematics from
-        θ0 within the position limits (:func:`~nearopt.kinematics.inverse_kinematics`).
+        θ0 within the position limits (:func:`~nearopt.robot.kinematics.inverse_kinematics`).
     cost
         The running cost f0 (default: :class:`~nearopt.TimeCost`). ``"scp"`` needs a
         :class:`~nearopt.TorqueCost` (time, the paper's eq. 32, per-joint weights).

@@ -19,9 +19,9 @@ if TYPE_CHECKING:
 
     from ..collision import Clearance, CollisionModel
     from ..cost import Cost
-    from ..kinematics import ToolPose
     from ..path import Path
     from ..robot import Robot
+    from ..robot.kinematics import ToolPose
     from ..timing import TimingResult
     from ..trajectory import Trajectory
     from ..verify import Waypoint

@@ -41,8 +41,8 @@ import scipy.sparse as sp
 
 from ..cost import TorqueCost
 from ..errors import InfeasiblePathError, SolverError, UnreachablePoseError
-from ..kinematics import ToolPose, inverse_kinematics, task_jacobian
 from ..path import BSplinePath
+from ..robot.kinematics import ToolPose, inverse_kinematics, task_jacobian
 from ..timing import Discretisation, LinearRows, is_solved, optimal_timing, solve_conic
 from .linearisation import PathBasis, path_basis, row_path_jacobian
 from .records import MethodOutcome, Run, SCPOptions, StopReason

@@ -40,8 +40,8 @@ from ..collision import Clearance, CollisionModel, Scene, collisions_for
 from ..cost import Cost, TimeCost
 from ..errors import ConfigurationError, NearoptError, TaskError
 from ..inputs import read_toml
-from ..kinematics import ToolPose
 from ..robot import Robot
+from ..robot.kinematics import ToolPose
 from ..trajectory import ChainedTrajectory
 from ..verify import Waypoint
 from .planner import plan

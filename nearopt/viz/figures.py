@@ -28,8 +28,8 @@ if TYPE_CHECKING:
     from numpy.typing import NDArray
 
     from ..collision import Scene
-    from ..kinematics import ToolPose
     from ..robot import Robot
+    from ..robot.kinematics import ToolPose
     from ..trajectory import ChainedTrajectory, Trajectory
 
 __all__ = [

@@ -10,9 +10,9 @@ import numpy as np
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from ..kinematics import ToolPose
     from ..planning import PlanResult, TaskResult
     from ..robot import Robot
+    from ..robot.kinematics import ToolPose
     from ..trajectory import Trajectory
 
 __all__ = ["plane_axes", "tip_path", "chain_points", "target_poses"]
@@ -24,7 +24,7 @@ def target_poses(result: PlanResult | TaskResult) -> tuple[ToolPose, ...]:
     as the tip's placement there (the goal as joint values is not marked: it is the end pose)."""
     import pinocchio as pin
 
-    from ..kinematics import ToolPose
+    from ..robot.kinematics import ToolPose
 
     robot = result.robot
 

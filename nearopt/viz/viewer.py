@@ -41,8 +41,8 @@ from pinocchio.visualize.meshcat_visualizer import loadPrimitive as load_primiti
 
 from ..collision.scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sphere
 from ..errors import ConfigurationError, NearoptError
-from ..kinematics import ToolPose
 from ..outputs import write_atomically
+from ..robot.kinematics import ToolPose
 from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:

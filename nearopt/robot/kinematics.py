@@ -16,12 +16,12 @@ from typing import TYPE_CHECKING
 import numpy as np
 import pinocchio as pin
 
-from .errors import ConfigurationError, UnreachablePoseError
+from ..errors import ConfigurationError, UnreachablePoseError
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
-    from .robot import Robot
+    from .dynamics import Robot
 
 __all__ = ["ToolPose", "inverse_kinematics", "pose_error", "task_jacobian"]
 

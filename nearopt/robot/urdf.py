@@ -22,7 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import URDFError
+from ..errors import URDFError
 
 __all__ = ["read_urdf", "chain_locks", "srdf_group_locks", "ArmDescription", "SUPPORTED_TYPES"]
 

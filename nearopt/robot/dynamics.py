@@ -26,8 +26,8 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 import pinocchio as pin
 
-from . import catalog
-from .errors import ConfigurationError, URDFError
+from .. import catalog
+from ..errors import ConfigurationError, URDFError
 from .urdf import read_urdf
 
 if TYPE_CHECKING:
