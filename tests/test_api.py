@@ -5,16 +5,16 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import signal
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import load
+from console import run_cli
 
 import nearopt
 from nearopt.api import _KINDS, PlanRequest, run
-from nearopt.cli import main, parse_plan, plan_request
+from nearopt.cli import parse_plan, plan_request
 
 
 def test_the_options_table_names_every_field() -> None:
@@ -135,30 +135,24 @@ def test_small_negative_numbers_are_planned_by_a_batch() -> None:
 
 def test_small_negative_numbers_on_the_command_line(tmp_path: Path) -> None:
     out = tmp_path / "plan.json"
-    handler = signal.getsignal(signal.SIGINT)
-    try:
-        code = main(
-            [
-                "plan",
-                "--robot",
-                "two_link",
-                "--q0",
-                "-1e-3",
-                "0.5",
-                "--qe",
-                "-.5",
-                "-1e-05",
-                "--stage1-only",
-                "--grid",
-                "60",
-                "--quiet",
-                "--json",
-                str(out),
-            ]
-        )
-    finally:
-        signal.signal(signal.SIGINT, handler)
-    assert code == 0
+    done = run_cli(
+        "plan",
+        "--robot",
+        "two_link",
+        "--q0",
+        "-1e-3",
+        "0.5",
+        "--qe",
+        "-.5",
+        "-1e-05",
+        "--stage1-only",
+        "--grid",
+        "60",
+        "--quiet",
+        "--json",
+        str(out),
+    )
+    assert done.returncode == 0, done.stderr
     q = np.array(json.loads(out.read_text())["q"])
     np.testing.assert_allclose(q[0], [-1e-3, 0.5], atol=1e-12)
     np.testing.assert_allclose(q[-1], [-0.5, -1e-05], atol=1e-9)

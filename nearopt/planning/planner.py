@@ -422,20 +422,16 @@ def _improve(
         if callback is not None:
             callback(entry)
 
+    run = Run(max_iterations, deadline, t_start, accept)
     common = dict(
         grid=grid,
         velocity_limits=velocity_limits,
         position_limits=position_limits,
         options=options,
-        run=Run(max_iterations, deadline, t_start, accept),
+        run=run,
     )
     if max_iterations == 0 or method == Method.PAPER:
-        accept(
-            Iteration(
-                0, initial.objective, None, initial.duration, time.perf_counter() - t_start, line
-            ),
-            initial,
-        )
+        run.report(0, initial, None, line)
     if max_iterations == 0:
         timing, reason, evaluations = initial, StopReason.ITERATION_LIMIT, 1
         first = "the straight line" if start is None else "the first path"

@@ -58,6 +58,14 @@ if TYPE_CHECKING:
 __all__ = ["sequential_convex", "collision_rows", "path_through", "knot_breaks"]
 
 
+# why a run converged (formatted with the tolerance, or the smallest trust radius)
+_MODEL_GAINS_NOTHING = (
+    "converged: the convex model finds no path that lowers J by more than {:g} relative"
+)
+_J_STOPPED = "converged: J changed by less than {:g} relative in each of the last 3 iterations"
+_NO_STEP_LOWERS_J = "converged: no step longer than {:g} of the joints' scale lowers J"
+
+
 def sequential_convex(
     robot: Robot,
     q0: NDArray[np.float64],
@@ -154,7 +162,7 @@ def sequential_convex(
         failures = 0
         dp, predicted, z_model = step
         if j0 - predicted <= options.tolerance * abs(j0):
-            reason, message = StopReason.CONVERGED, _converged("model", options)
+            reason, message = StopReason.CONVERGED, _MODEL_GAINS_NOTHING.format(options.tolerance)
             break
         guess = disc.b(z_model)  # stage 1 of the trial starts from the model's timing
         p_trial, trial, timed = _try_step(
@@ -177,10 +185,13 @@ def sequential_convex(
             run.report(index, timing, float(np.max(np.abs(dp))), timing.trajectory.path)
             small = small + 1 if gain < options.tolerance * abs(j0) else 0
             if small == 3:
-                reason, message = StopReason.CONVERGED, _converged("small", options)
+                reason, message = StopReason.CONVERGED, _J_STOPPED.format(options.tolerance)
                 break
         if radius < options.min_trust_radius:
-            reason, message = StopReason.CONVERGED, _converged("radius", options)
+            reason, message = (
+                StopReason.CONVERGED,
+                _NO_STEP_LOWERS_J.format(options.min_trust_radius),
+            )
             break
     if iterate_grid < grid:  # the returned path on the plan's own grid
         timing, message, timed = _on_plan_grid(
@@ -245,24 +256,6 @@ def _new_radius(radius: float, gain: float, ratio: float, reach: float, boundary
             return 0.5 * reach
         return radius
     return 0.25 * reach
-
-
-def _converged(why: str, options: SCPOptions) -> str:
-    """The message of a converged run: the model finds no gain, J stopped changing, or no step
-    of the trust region's smallest size lowers J."""
-    if why == "model":
-        return (
-            f"converged: the convex model finds no path that lowers J by more than "
-            f"{options.tolerance:g} relative"
-        )
-    if why == "small":
-        return (
-            f"converged: J changed by less than {options.tolerance:g} relative "
-            "in each of the last 3 iterations"
-        )
-    return (
-        f"converged: no step longer than {options.min_trust_radius:g} of the joints' scale lowers J"
-    )
 
 
 def _trust_scale(

@@ -106,10 +106,7 @@ class BetweenSamples:
     @staticmethod
     def _envelope(v: NDArray[np.float64]) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Upper and lower bounds of a smooth function on each interval between points."""
-        curvature = _curvature(v)
-        change = np.abs(np.diff(curvature, axis=1))
-        curvature = np.abs(curvature)
-        margin = (np.maximum(curvature[:, :-1], curvature[:, 1:]) + change) / 8.0
+        margin = _margin(v)
         return (
             np.maximum(v[:, :-1], v[:, 1:]) + margin,
             np.minimum(v[:, :-1], v[:, 1:]) - margin,
@@ -248,11 +245,17 @@ def speed_envelope(
     G0 = θ'_i(j)² + e_j to G1 = θ'_i(j+1)² + e_j. Returns (G0, G1), each (N, P + 1, n).
     """
     g = slope**2
-    curvature = _curvature(g)
+    margin = _margin(g)
+    return g[:, :-1] + margin, g[:, 1:] + margin
+
+
+def _margin(v: NDArray[np.float64]) -> NDArray[np.float64]:
+    """(max(|κ_j|, |κ_{j+1}|) + |κ_{j+1} − κ_j|) / 8 on each interval between points (axis 1):
+    how far a smooth function may leave its chord there (κ of :func:`_curvature`)."""
+    curvature = _curvature(v)
     change = np.abs(np.diff(curvature, axis=1))
     curvature = np.abs(curvature)
-    margin = (np.maximum(curvature[:, :-1], curvature[:, 1:]) + change) / 8.0
-    return g[:, :-1] + margin, g[:, 1:] + margin
+    return (np.maximum(curvature[:, :-1], curvature[:, 1:]) + change) / 8.0
 
 
 def speed_lines(

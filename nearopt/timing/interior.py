@@ -322,8 +322,6 @@ def _energy_rows(disc: Discretisation, weights: NDArray[np.float64]) -> tuple:
     """The torque samples of the energy term Σ w_i u_i² (joint-major as in Discretisation) in
     pair form, with their weights; empty when no weight is positive (time-optimal)."""
     t_rows = np.arange(disc.blocks.torque.start, disc.blocks.torque.stop)
-    if not np.any(weights > 0.0):
-        t_rows = t_rows[:0]
     t_w = weights[disc.joint[t_rows]]
     t_rows, t_w = t_rows[t_w > 0.0], t_w[t_w > 0.0]
     return (
