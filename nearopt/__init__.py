@@ -59,7 +59,7 @@ from .robot import JointLimits, PathCoefficients, Robot
 from .robot.kinematics import ToolPose, inverse_kinematics
 from .timing import TimingResult, optimal_timing
 from .trajectory import ChainedTrajectory, Samples, Trajectory
-from .verify import VerificationError, VerificationReport, Waypoint, verify
+from .verify import VerificationError, VerificationReport, Waypoint, verify, verify_plan
 
 __all__ = [
     "Robot",
@@ -92,6 +92,7 @@ __all__ = [
     "ChainedTrajectory",
     "Samples",
     "verify",
+    "verify_plan",
     "VerificationReport",
     "VerificationError",
     "Waypoint",

@@ -31,7 +31,7 @@ from .planning.task import check_targets
 from .robot import Robot
 from .robot.kinematics import ToolPose
 from .validate import MAX_RATE, MAX_SAMPLES, check_rate, check_samples
-from .verify import VerificationReport, verify
+from .verify import VerificationReport, verify_plan
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -508,19 +508,13 @@ def check(result: PlanResult | TaskResult, prepared: Prepared) -> VerificationRe
     if prepared.task is not None:
         last = prepared.task.targets[-1].goal
         qe = last if isinstance(last, ToolPose) else np.asarray(last)
-    return verify(
-        result.trajectory,
-        prepared.robot,
-        rate=max(request.rate, 1000.0),
+    return verify_plan(
+        result,
+        rate=request.rate,
         q0=prepared.q0,
         qe=None if isinstance(qe, ToolPose) else qe,
-        goal_pose=result.goal,
-        cost=result.cost,
-        J=result.J,
         velocity_limits=not request.no_velocity_limits,
         position_limits=not request.no_position_limits,
-        collisions=result.collisions,
-        waypoints=result.waypoints,
     )
 
 

@@ -7,6 +7,11 @@ one type; the subclasses say what kind of thing went wrong and carry the values 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
+if TYPE_CHECKING:
+    from .verify import VerificationReport
+
 __all__ = [
     "NearoptError",
     "URDFError",
@@ -17,6 +22,7 @@ __all__ = [
     "ConfigurationError",
     "InfeasiblePathError",
     "SolverError",
+    "VerificationError",
     "SamplingWarning",
 ]
 
@@ -207,6 +213,15 @@ class UnreachablePoseError(NearoptError):
         super().__init__(message)
         self.distance = distance
         self.angle = angle
+
+
+class VerificationError(NearoptError):
+    """A motion failed verification; ``report`` (a :class:`~nearopt.VerificationReport`) says
+    which checks and by how much."""
+
+    def __init__(self, message: str, report: VerificationReport) -> None:
+        super().__init__(message)
+        self.report = report
 
 
 class SamplingWarning(UserWarning):

@@ -16,7 +16,7 @@ import numpy as np
 import pinocchio as pin
 from scipy.integrate import solve_ivp
 
-from .errors import NearoptError
+from .errors import VerificationError
 from .validate import check_rate
 
 if TYPE_CHECKING:
@@ -24,19 +24,20 @@ if TYPE_CHECKING:
 
     from .collision import CollisionModel
     from .cost import Cost
+    from .planning import Plan
     from .robot import Robot
     from .robot.kinematics import ToolPose
     from .trajectory import Motion, Trajectory
 
-__all__ = ["Check", "VerificationReport", "VerificationError", "Waypoint", "Tolerances", "verify"]
-
-
-class VerificationError(NearoptError):
-    """A motion failed verification; ``report`` says which checks and by how much."""
-
-    def __init__(self, message: str, report: VerificationReport) -> None:
-        super().__init__(message)
-        self.report = report
+__all__ = [
+    "Check",
+    "VerificationReport",
+    "VerificationError",
+    "Waypoint",
+    "Tolerances",
+    "verify",
+    "verify_plan",
+]
 
 
 @dataclass(frozen=True)
@@ -239,6 +240,53 @@ def verify(
     if simulate:
         checks += _simulation_checks(robot, trajectory, goal, tol)
     return VerificationReport(tuple(checks), float(rate), int(motion.t.size))
+
+
+def verify_plan(
+    plan: Plan,
+    *,
+    rate: float = 1000.0,
+    q0: ArrayLike | None = None,
+    qe: ArrayLike | None = None,
+    velocity_limits: bool = True,
+    position_limits: bool = True,
+) -> VerificationReport:
+    """Check a plan (a :class:`~nearopt.PlanResult` or :class:`~nearopt.TaskResult`) with what
+    it carries, as ``nearopt plan`` and ``nearopt batch`` do before writing it: :func:`verify`
+    of its motion on its robot at ``rate`` (never more coarsely than 1 kHz), with its goal pose,
+    its via-points or targets, its collision model (clearance at every sample) and its J
+    recomputed from its cost.
+
+    Parameters
+    ----------
+    plan
+        The plan.
+    rate
+        Controller rate [Hz]; the check samples at max(rate, 1000 Hz).
+    q0, qe
+        The start and goal asked for [rad or m], shape (n,); default: the motion's own ends.
+    velocity_limits, position_limits
+        Whether the plan was asked to keep the joint speed / position limits.
+
+    Raises
+    ------
+    ConfigurationError
+        As :func:`verify`.
+    """
+    return verify(
+        plan.trajectory,
+        plan.robot,
+        rate=max(check_rate(rate, "the controller rate"), 1000.0),
+        q0=q0,
+        qe=qe,
+        goal_pose=plan.goal,
+        cost=plan.cost,
+        J=plan.J,
+        velocity_limits=velocity_limits,
+        position_limits=position_limits,
+        collisions=plan.collisions,
+        waypoints=plan.waypoints,
+    )
 
 
 @dataclass(frozen=True)

@@ -2,12 +2,14 @@
 
 from __future__ import annotations
 
+import dataclasses
+
 import numpy as np
 import pytest
 from conftest import load
 
 import nearopt
-from nearopt import Trajectory, VerificationError, verify
+from nearopt import Trajectory, VerificationError, verify, verify_plan
 from nearopt.paper_example import COST, THETA_0, THETA_E
 
 
@@ -35,6 +37,21 @@ def test_a_plan_passes_every_check(plan: nearopt.PlanResult) -> None:
     assert report.samples == int(np.floor(plan.duration * 500)) + 1 + 1  # 0 … te inclusive
     assert report["torque limits (RNEA)"].worst < 0  # strictly inside somewhere short of limits
     report.raise_if_failed()
+
+
+def test_verify_plan_checks_what_the_plan_carries(plan: nearopt.PlanResult) -> None:
+    """verify_plan takes the robot, cost, J and motion from the plan (at 1 kHz at least), the
+    same checks as verify with them; the plan's robot is the one checked against."""
+    report = verify_plan(plan, rate=250.0, q0=THETA_0, qe=THETA_E)
+    assert report.passed, str(report)
+    assert report.rate == 1000.0
+    by_hand = verify(
+        plan.trajectory, plan.robot, rate=1000.0, q0=THETA_0, qe=THETA_E, cost=COST, J=plan.J
+    )
+    assert report == by_hand
+    damped = dataclasses.replace(plan, robot=plan.robot.with_limits(damping=[0.5, 0.5]))
+    failed = {c.name for c in verify_plan(damped).failures()}
+    assert {"simulated end position", "simulation window defect"} <= failed
 
 
 def test_a_faster_motion_breaks_the_torque_limits(plan: nearopt.PlanResult) -> None:
