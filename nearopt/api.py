@@ -14,11 +14,14 @@ Layers, from the top: :mod:`nearopt.cli` (argparse, outputs, signals) → :mod:`
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
 import warnings
 from collections.abc import Callable, Mapping
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, fields, replace
 from enum import Enum
+from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -46,6 +49,7 @@ __all__ = [
     "check",
     "run",
     "OUTPUT_OPTIONS",
+    "FILE_FIELDS",
     "DISPLAY_OPTIONS",
     "MAX_SAMPLES",
     "MAX_RATE",
@@ -53,6 +57,8 @@ __all__ = [
 
 OUTPUT_OPTIONS = ("json", "csv", "html", "plots", "show")
 """Options of ``nearopt plan`` that write or show the plan: the caller's, not the request's."""
+FILE_FIELDS = ("urdf", "srdf", "scene", "task")
+"""The fields that name files (read when the request is prepared)."""
 DISPLAY_OPTIONS = ("verify", "quiet")
 """Options of ``nearopt plan`` that only change what it prints (accepted, and ignored, in a
 mapping)."""
@@ -262,6 +268,18 @@ class PlanRequest:
             return TorqueCost(weights=list(self.weights))
         return TimeCost()
 
+    def fingerprint(self) -> str:
+        """The request as canonical JSON: the fields that differ from their defaults, and the
+        SHA-256 of every file it names (``null`` for one that cannot be read). Two requests with
+        the same fingerprint plan the same motion: a batch resumes by comparing them."""
+        values = {
+            f.name: _json_value(getattr(self, f.name))
+            for f in fields(self)
+            if getattr(self, f.name) != f.default
+        }
+        files = {key: _sha256(getattr(self, key)) for key in FILE_FIELDS if getattr(self, key)}
+        return json.dumps({**values, "file_sha256": files}, sort_keys=True)
+
     def with_rate(self, rate: float) -> PlanRequest:
         """The same request at another sampling rate [Hz]."""
         return replace(self, rate=float(rate))
@@ -304,6 +322,19 @@ _KINDS: dict[str, _Kind] = {
     "rate": _Kind.NUMBER,
 }
 """The one table of options: every field of :class:`PlanRequest` and how a mapping gives it."""
+
+
+def _json_value(value: object) -> object:
+    """A field's value as JSON holds it (tuples as lists)."""
+    return [_json_value(v) for v in value] if isinstance(value, tuple) else value
+
+
+def _sha256(name: str) -> str | None:
+    """The SHA-256 of a file's bytes, or None if it cannot be read."""
+    try:
+        return hashlib.sha256(Path(name).read_bytes()).hexdigest()
+    except OSError:
+        return None
 
 
 def _read(key: str, value: object, kind: _Kind) -> object:

@@ -26,7 +26,6 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import csv
-import hashlib
 import io
 import json
 import multiprocessing
@@ -42,7 +41,7 @@ from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from .api import PlanRequest, run
+from .api import FILE_FIELDS, PlanRequest, run
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .outputs import make_folder, resolve_output, write_atomically, write_outputs
 from .validate import check_rate
@@ -65,8 +64,6 @@ __all__ = [
     "SUMMARY_FIELDS",
 ]
 
-PATH_OPTIONS = ("urdf", "srdf", "scene", "task")
-"""Options naming files: relative paths are read from the requests file's folder."""
 SUMMARY_FIELDS = ("id", "status", "J", "te", "iterations", "wall_time", "error")
 """The columns of ``summary.csv``."""
 _ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
@@ -112,7 +109,7 @@ class MotionRequest:
             )
         options = {k: _plain(v) for k, v in data.items() if k != "id"}
         base = Path.cwd() if folder is None else folder
-        for key in PATH_OPTIONS:
+        for key in FILE_FIELDS:
             if isinstance(options.get(key), str) and options[key]:
                 options[key] = str((base / Path(options[key]).expanduser()).resolve())
         return cls(motion_id, options)
@@ -130,20 +127,14 @@ class MotionRequest:
         return request if "rate" in self.options else request.with_rate(rate)
 
     def fingerprint(self, rate: float = 1000.0) -> str:
-        """The request as canonical JSON, with the SHA-256 of every file it names and the
-        samples' rate: a written motion counts as done only for the same."""
-        files = {}
-        for key in PATH_OPTIONS:
-            name = self.options.get(key)
-            if isinstance(name, str) and name:
-                try:
-                    files[key] = hashlib.sha256(Path(name).read_bytes()).hexdigest()
-                except OSError:
-                    files[key] = None
-        return json.dumps(
-            {"id": self.id, **self.options, "file_sha256": files, "batch_rate": float(rate)},
-            sort_keys=True,
-        )
+        """The motion's id and its request's :meth:`~nearopt.api.PlanRequest.fingerprint` (the
+        options, the SHA-256 of every file they name, the samples' rate): a written motion counts
+        as done only for the same. Options that make no request are taken as they are."""
+        try:
+            request: dict[str, Any] = json.loads(self.plan_request(rate).fingerprint())
+        except ConfigurationError:
+            request = {"options": dict(self.options), "batch_rate": float(rate)}
+        return json.dumps({"id": self.id, **request}, sort_keys=True)
 
 
 def _plain(value: object) -> object:

@@ -109,6 +109,23 @@ def test_a_bad_mapping_says_which_option(options: dict, message: str) -> None:
         PlanRequest.from_mapping(options).check()
 
 
+def test_the_fingerprint_names_the_motion_and_the_files_it_reads(tmp_path: Path) -> None:
+    """The same motion spelled two ways has one fingerprint; another value, another rate or
+    other contents of a file it names change it; defaults are left out."""
+    task = tmp_path / "t.toml"
+    task.write_text("[[target]]\nq = [0.2, -0.3]\n")
+    a = PlanRequest.from_mapping({"robot": "two_link", "q0": [0, 0], "task": str(task)})
+    b = PlanRequest(robot="two_link", q0=(0.0, 0.0), task=str(task), grid=200, deg=False)
+    assert a.fingerprint() == b.fingerprint()
+    fingerprint = json.loads(a.fingerprint())
+    assert set(fingerprint) == {"robot", "q0", "task", "file_sha256"}
+    assert fingerprint["file_sha256"]["task"] is not None
+    assert a.with_rate(500.0).fingerprint() != a.fingerprint()
+    assert dataclasses.replace(a, q0=(0.0, 1e-12)).fingerprint() != a.fingerprint()
+    task.write_text("[[target]]\nq = [0.2, -0.31]\n")
+    assert a.fingerprint() != json.dumps(fingerprint, sort_keys=True)
+
+
 def test_small_negative_numbers_are_planned_by_a_batch() -> None:
     """What a batch once turned back into argv (``-1e-05`` read as an option) is planned, and
     each motion starts and ends where it was asked to."""

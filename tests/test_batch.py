@@ -188,7 +188,7 @@ def test_a_local_batch_plans_every_motion_and_records_the_failure(
             continue
         doc = json.loads((out / f"{row['id']}.json").read_text())
         assert doc["id"] == row["id"]
-        assert doc["request"] == {**requests[row["id"]], "file_sha256": {}, "batch_rate": 1000.0}
+        assert doc["request"] == {**requests[row["id"]], "file_sha256": {}}  # at 1 kHz
         assert float(row["J"]) == doc["J"] and float(row["te"]) == doc["duration"]
         np.testing.assert_allclose(doc["q"][0], requests[row["id"]]["q0"], atol=1e-12)
         np.testing.assert_allclose(doc["q"][-1], requests[row["id"]]["qe"], atol=1e-9)
