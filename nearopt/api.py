@@ -29,7 +29,16 @@ import numpy as np
 from .collision import Scene
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, SamplingWarning
-from .planning import METHODS, Iteration, PlanResult, Task, TaskResult, plan, plan_task
+from .planning import (
+    METHODS,
+    Iteration,
+    PlanResult,
+    PlanSettings,
+    Task,
+    TaskResult,
+    plan,
+    plan_task,
+)
 from .planning.task import check_targets
 from .robot import Robot
 from .robot.kinematics import ToolPose
@@ -492,7 +501,7 @@ def solve(
     """Plan a prepared request: :func:`~nearopt.plan`, or :func:`~nearopt.plan_task` for a task
     (``segment_callback(k, iteration)`` then)."""
     request = prepared.request
-    common = dict(
+    settings = PlanSettings(
         method=request.method,
         grid=request.grid,
         max_iterations=0 if request.stage1_only else request.max_iterations,
@@ -510,9 +519,9 @@ def solve(
             prepared.q0,
             prepared.task,
             prepared.cost,
+            settings,
             callback=segment_callback,
-            **common,
-        )  # type: ignore[arg-type]
+        )
     return plan(
         prepared.robot,
         prepared.q0,
@@ -520,7 +529,7 @@ def solve(
         prepared.cost,
         callback=callback,
         via=prepared.via,
-        **common,
+        **settings.keywords(),
     )  # type: ignore[arg-type]
 
 

@@ -42,7 +42,11 @@ def main() -> None:
     )
 
     result = nearopt.plan_task(
-        robot, task.start, task, cost, scene=cell, time_limit=args.time_limit
+        robot,
+        task.start,
+        task,
+        cost,
+        nearopt.PlanSettings(scene=cell, time_limit=args.time_limit),
     )
     print(f"\n{'target':>9} {'stop':>5} {'t [s]':>7}   x, y, z [m]")
     for target, t in zip(result.targets, result.target_times, strict=True):

@@ -55,7 +55,9 @@ def run(
     optimise: bool,
 ) -> tuple[nearopt.TaskResult, float, bool]:
     t0 = time.perf_counter()
-    result = nearopt.plan_task(robot, q0, targets, cost, scene=scene, optimise_goal=optimise)
+    result = nearopt.plan_task(
+        robot, q0, targets, cost, nearopt.PlanSettings(scene=scene, optimise_goal=optimise)
+    )
     wall = time.perf_counter() - t0
     report = nearopt.verify(
         result.trajectory,

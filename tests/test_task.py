@@ -68,8 +68,7 @@ def test_a_task_stops_where_it_says_and_passes_where_it_says() -> None:
         UR5_START,
         [Target(UR5_PASS, stop=False, name="pass"), Target(UR5_STOP, name="stop"), UR5_GOAL],
         cost,
-        grid=100,
-        max_iterations=8,
+        nearopt.PlanSettings(grid=100, max_iterations=8),
     )
     assert [t.name for t in result.targets] == ["pass", "stop", "target 3"]
     assert len(result.segments) == 2 and len(result.segments[0].via) == 1
@@ -156,7 +155,9 @@ def test_bad_targets_are_configuration_errors() -> None:
         with pytest.raises(nearopt.ConfigurationError):
             nearopt.plan_task(robot, UR5_START, targets)
     with pytest.raises(TaskError, match=r"target 'target 2': q must have 6 values"):
-        nearopt.plan_task(robot, UR5_START, [UR5_GOAL, np.zeros(5)], max_iterations=0)
+        nearopt.plan_task(
+            robot, UR5_START, [UR5_GOAL, np.zeros(5)], None, nearopt.PlanSettings(max_iterations=0)
+        )
 
 
 def test_the_cli_plans_a_task_file_and_marks_the_segments(tmp_path: Path) -> None:
@@ -320,10 +321,14 @@ def test_every_target_is_checked_before_any_planning(tmp_path: Path) -> None:
         path.write_text(start + text)
         task = Task.from_file(path)
         with pytest.raises(TaskError) as caught:
-            nearopt.plan_task(robot, None, task, time_limit=1e-9)  # would stop at once
+            nearopt.plan_task(
+                robot, None, task, None, nearopt.PlanSettings(time_limit=1e-9)
+            )  # would stop at once
         assert (caught.value.target, caught.value.field) == (target, field), str(caught.value)
         assert str(path) in str(caught.value)
     with pytest.raises(nearopt.ConfigurationError, match="time_limit"):
-        nearopt.plan_task(robot, None, task, time_limit="5")
+        nearopt.plan_task(robot, None, task, None, nearopt.PlanSettings(time_limit="5"))
+    with pytest.raises(nearopt.ConfigurationError, match="settings must be a nearopt.PlanSettings"):
+        nearopt.plan_task(robot, None, task, None, {"grid": 60})
     with pytest.raises(nearopt.ConfigurationError, match="has no goal"):
         nearopt.plan_task(robot, np.zeros(7), [Target(None)])

@@ -362,8 +362,7 @@ def test_the_page_of_a_task_marks_every_target(tmp_path: Path) -> None:
         robot,
         [0, -0.5, 0, -2, 0, 1.5, 0.8],
         [nearopt.Target(stop, name="stop"), goal],
-        grid=60,
-        max_iterations=1,
+        settings=nearopt.PlanSettings(grid=60, max_iterations=1),
     )
     html = export_html(result, tmp_path / "task.html")
     with playwright.sync_playwright() as p:

@@ -8,16 +8,16 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from enum import StrEnum
-from typing import TYPE_CHECKING, Literal, Protocol, runtime_checkable
+from typing import TYPE_CHECKING, Any, Literal, Protocol, runtime_checkable
 
 import numpy as np
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
 
-    from ..collision import Clearance, CollisionModel
+    from ..collision import Clearance, CollisionModel, Scene
     from ..cost import Cost
     from ..path import Path
     from ..robot import Robot
@@ -31,6 +31,7 @@ __all__ = [
     "StopReason",
     "SCPOptions",
     "PaperOptions",
+    "PlanSettings",
     "Iteration",
     "MethodOutcome",
     "PlanResult",
@@ -126,6 +127,30 @@ class PaperOptions:
     delta_t: float = 0.1
     trials: int = 8
     tolerance: float = 1e-7
+
+
+@dataclass(frozen=True)
+class PlanSettings:
+    """How to plan, as one record: the keywords of :func:`~nearopt.plan` (see there for each)
+    that every rest-to-rest plan shares; :func:`~nearopt.plan_task` takes it for all its
+    segments (``max_iterations`` then per segment, ``time_limit`` [s] for the whole task).
+    """
+
+    method: Method | str | None = None
+    options: SCPOptions | PaperOptions | None = None
+    grid: int = 200
+    max_iterations: int = 200
+    time_limit: float = 300.0
+    velocity_limits: bool = True
+    position_limits: bool = True
+    scene: Scene | CollisionModel | None = None
+    margin: float | None = None
+    self_collision: bool | None = None
+    optimise_goal: bool = True
+
+    def keywords(self) -> dict[str, Any]:
+        """The settings as :func:`~nearopt.plan`'s keyword arguments."""
+        return {f.name: getattr(self, f.name) for f in fields(self)}
 
 
 @dataclass(frozen=True)

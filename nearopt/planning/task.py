@@ -30,13 +30,13 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..collision import Clearance, CollisionModel, Scene, collisions_for
+from ..collision import Clearance, CollisionModel, collisions_for
 from ..cost import Cost, TimeCost
 from ..errors import ConfigurationError, NearoptError, TaskError
 from ..inputs import read_toml
@@ -45,7 +45,7 @@ from ..robot.kinematics import ToolPose
 from ..trajectory import ChainedTrajectory
 from ..verify import Waypoint
 from .planner import plan
-from .records import Iteration, Method, PaperOptions, PlanResult, SCPOptions, StopReason
+from .records import Iteration, PlanResult, PlanSettings, StopReason
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -348,41 +348,28 @@ def plan_task(
     q0: ArrayLike,
     targets: Task | Sequence[Target | ArrayLike | ToolPose],
     cost: Cost | None = None,
+    settings: PlanSettings | None = None,
     *,
-    method: Method | str | None = None,
-    options: SCPOptions | PaperOptions | None = None,
-    grid: int = 200,
-    max_iterations: int = 200,
-    time_limit: float = 300.0,
-    velocity_limits: bool = True,
-    position_limits: bool = True,
     callback: Callable[[int, Iteration], None] | None = None,
-    scene: Scene | CollisionModel | None = None,
-    margin: float | None = None,
-    self_collision: bool | None = None,
-    optimise_goal: bool = True,
 ) -> TaskResult:
     """Plan a task: from rest at θ0 through its targets in order, stopping where they say.
 
     Parameters
     ----------
-    robot, q0, cost, method, options, grid, velocity_limits, position_limits, scene, margin, \
-self_collision
-        As :func:`~nearopt.plan`, for every segment (one collision model for all).
-    optimise_goal
-        The last target, when it is a tool pose, moves along its pose with the last segment's
-        path to lower J (:func:`~nearopt.plan`). The targets stopped at before it keep inverse
-        kinematics' configurations: moving one changes the segment after it too, and moving
-        each for its own segment alone was measured to raise the task's J (up to +41 % on a
-        seeded panda task).
+    robot, q0, cost
+        As :func:`~nearopt.plan`.
     targets
         A :class:`Task`, or :class:`Target` records; a bare joint vector or
         :class:`~nearopt.ToolPose` is a target the arm stops at. The last target is always a stop.
-    max_iterations
-        The iteration budget of each segment.
-    time_limit
-        Wall-time budget of the whole task [s], shared by the segments still to plan (time a
-        segment leaves is passed on).
+    settings
+        How every segment is planned (:class:`~nearopt.planning.PlanSettings`, one collision
+        model for all; default: its defaults). ``max_iterations`` is the budget of each segment;
+        ``time_limit`` [s] that of the whole task, shared by the segments still to plan (time a
+        segment leaves is passed on). With ``optimise_goal`` the last target, when it is a tool
+        pose, moves along its pose with the last segment's path to lower J
+        (:func:`~nearopt.plan`); the targets stopped at before it keep inverse kinematics'
+        configurations: moving one changes the segment after it too, and moving each for its own
+        segment alone was measured to raise the task's J (up to +41 % on a seeded panda task).
     callback
         Called with (segment index, :class:`Iteration`) for every accepted iterate.
 
@@ -396,7 +383,7 @@ self_collision
     Raises
     ------
     ConfigurationError
-        No targets, a bad target (naming it), or a bad argument as :func:`~nearopt.plan`.
+        No targets, a bad target (naming it), or a bad setting as :func:`~nearopt.plan`.
     InfeasiblePathError, UnreachablePoseError, CollisionError, SolverError
         As :func:`~nearopt.plan`, for a segment (the message names it and its targets).
     """
@@ -405,12 +392,19 @@ self_collision
         raise ConfigurationError(
             f"robot must be a nearopt.Robot, got {type(robot).__name__} {robot!r:.60}"
         )
+    settings = PlanSettings() if settings is None else settings
+    if not isinstance(settings, PlanSettings):
+        raise ConfigurationError(
+            f"settings must be a nearopt.PlanSettings, got {type(settings).__name__} "
+            f"{settings!r:.60}"
+        )
     records = _targets(targets.targets if isinstance(targets, Task) else targets)
     if q0 is None and isinstance(targets, Task) and targets.start is not None:
         q0 = targets.start
     if q0 is None:
         raise ConfigurationError("give the start configuration q0 (the task has no start)")
     cost = TimeCost() if cost is None else cost
+    time_limit = settings.time_limit
     if (
         isinstance(time_limit, bool)
         or not isinstance(time_limit, int | float)
@@ -424,31 +418,20 @@ self_collision
         robot,
         records,
         q0,
-        position_limits=position_limits,
+        position_limits=settings.position_limits,
         where=None
         if not isinstance(targets, Task) or targets.source is None
         else str(targets.source),
     )
-    collisions = collisions_for(robot, scene, margin, self_collision)
-    settings = dict(
-        method=method,
-        options=options,
-        grid=grid,
-        velocity_limits=velocity_limits,
-        position_limits=position_limits,
-        scene=collisions,
-    )
+    collisions = collisions_for(robot, settings.scene, settings.margin, settings.self_collision)
     segments, interrupted = _plan_segments(
         robot,
         _stop_groups(records),
         q0,
         cost,
-        settings,
-        max_iterations,
-        optimise_goal,
+        replace(settings, scene=collisions, margin=None, self_collision=None),
         callback,
         t_start,
-        time_limit,
     )
     trajectory = ChainedTrajectory([s.trajectory for s in segments])
     message = "; ".join(f"segment {k + 1}: {s.status}, {s.message}" for k, s in enumerate(segments))
@@ -478,12 +461,9 @@ def _plan_segments(
     groups: list[list[Target]],
     q0: NDArray[np.float64],
     cost: Cost,
-    settings: dict[str, Any],
-    max_iterations: int,
-    optimise_goal: bool,
+    settings: PlanSettings,
     callback: Callable[[int, Iteration], None] | None,
     t_start: float,
-    time_limit: float,
 ) -> tuple[list[PlanResult], bool]:
     """Every segment planned from where the last one ended (its via-points passed through), the
     time left shared by the segments still to plan; after a Ctrl-C the rest are timed on their
@@ -492,33 +472,27 @@ def _plan_segments(
     start = q0
     interrupted = False
     for k, group in enumerate(groups):
-        left = time_limit - (time.perf_counter() - t_start)
-        budget = max(left / (len(groups) - k), 1e-3)
+        left = settings.time_limit - (time.perf_counter() - t_start)
         names = ", ".join(repr(t.name) for t in group)
 
         def forward(entry: Iteration, k: int = k) -> None:
             if callback is not None:
                 callback(k, entry)
 
-        same = dict(
-            **settings,
-            time_limit=budget,
-            optimise_goal=optimise_goal and k == len(groups) - 1,
-            via=[t.goal for t in group[:-1]],
+        same = replace(
+            settings,
+            time_limit=max(left / (len(groups) - k), 1e-3),
+            optimise_goal=settings.optimise_goal and k == len(groups) - 1,
+            max_iterations=0 if interrupted else settings.max_iterations,
         )
+        via = [t.goal for t in group[:-1]]
+        goal = group[-1].goal
         try:
-            segment = plan(
-                robot,
-                start,
-                group[-1].goal,
-                cost,
-                callback=forward,
-                max_iterations=0 if interrupted else max_iterations,
-                **same,
-            )  # type: ignore[arg-type]
+            segment = plan(robot, start, goal, cost, callback=forward, via=via, **same.keywords())  # type: ignore[arg-type]
         except KeyboardInterrupt:  # before the segment had a plan: time its first path only
             interrupted = True
-            segment = plan(robot, start, group[-1].goal, cost, max_iterations=0, **same)  # type: ignore[arg-type]
+            first = replace(same, max_iterations=0).keywords()
+            segment = plan(robot, start, goal, cost, via=via, **first)  # type: ignore[arg-type]
         except NearoptError as exc:  # the same error, saying which segment
             exc.args = (f"segment {k + 1} (to {names}): {exc}", *exc.args[1:])
             raise
