@@ -7,11 +7,6 @@ one type; the subclasses say what kind of thing went wrong and carry the values 
 
 from __future__ import annotations
 
-from typing import TYPE_CHECKING
-
-if TYPE_CHECKING:
-    from .verify import VerificationReport
-
 __all__ = [
     "NearoptError",
     "URDFError",
@@ -219,7 +214,7 @@ class VerificationError(NearoptError):
     """A motion failed verification; ``report`` (a :class:`~nearopt.VerificationReport`) says
     which checks and by how much."""
 
-    def __init__(self, message: str, report: VerificationReport) -> None:
+    def __init__(self, message: str, report: object) -> None:
         super().__init__(message)
         self.report = report
 

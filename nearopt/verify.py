@@ -10,7 +10,7 @@ but the motion itself.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import pinocchio as pin
@@ -24,7 +24,6 @@ if TYPE_CHECKING:
 
     from .collision import CollisionModel
     from .cost import Cost
-    from .planning import Plan
     from .robot import Robot
     from .robot.kinematics import ToolPose
     from .trajectory import Motion, Trajectory
@@ -242,8 +241,34 @@ def verify(
     return VerificationReport(tuple(checks), float(rate), int(motion.t.size))
 
 
+class Planned(Protocol):
+    """What :func:`verify_plan` reads of a plan (a :class:`~nearopt.Plan`: a
+    :class:`~nearopt.PlanResult` or a :class:`~nearopt.TaskResult`)."""
+
+    @property
+    def robot(self) -> Robot: ...
+
+    @property
+    def trajectory(self) -> Motion: ...
+
+    @property
+    def J(self) -> float: ...  # noqa: N802 - the paper's name
+
+    @property
+    def cost(self) -> Cost: ...
+
+    @property
+    def goal(self) -> ToolPose | None: ...
+
+    @property
+    def collisions(self) -> CollisionModel | None: ...
+
+    @property
+    def waypoints(self) -> tuple[Waypoint, ...]: ...
+
+
 def verify_plan(
-    plan: Plan,
+    plan: Planned,
     *,
     rate: float = 1000.0,
     q0: ArrayLike | None = None,
