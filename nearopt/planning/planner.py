@@ -20,27 +20,25 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..collision import Clearance, CollisionModel, Scene, collisions_for
-from ..collision.sampling import collision_free_path
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import (
-    CollisionError,
     ConfigurationError,
-    InfeasiblePathError,
     SolverError,
     UnreachablePoseError,
 )
-from ..path import BSplinePath, Path, StraightPath
+from ..path import Path
 from ..robot import Robot
 from ..robot.kinematics import ToolPose, inverse_kinematics
 from ..timing import MAX_GRID, TimingResult, optimal_timing
 from .paper import paper_iterations
 from .records import (
+    MAX_CONTROL_POINTS,
     Iteration,
     Method,
     MethodOutcome,
@@ -48,9 +46,11 @@ from .records import (
     PlanResult,
     Run,
     SCPOptions,
+    Segment,
     StopReason,
 )
-from .scp import knot_breaks, path_through, sequential_convex
+from .scp import sequential_convex
+from .start import first_path
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -58,8 +58,6 @@ if TYPE_CHECKING:
 __all__ = ["plan", "METHODS", "MAX_CONTROL_POINTS"]
 
 METHODS = tuple(m.value for m in Method)
-MAX_CONTROL_POINTS = 200  # interior B-spline control points; the convex model grows with K·n
-SCREENING = 6  # stage-2 iterations from each OMPL path before the best is continued
 
 
 def plan(
@@ -174,35 +172,12 @@ def plan(
         via,
         t_start,
     )
-    line, start, via_s = _first_path(setup)
+    line, start, via_s = first_path(setup)
     initial = _time_first_path(setup, line, start)
     timing, reason, message, evaluations, history = _improve(
         setup, line, start, via_s, initial, callback, verbose
     )
     return _result(setup, timing, initial, history, reason, message, evaluations, via_s)
-
-
-@dataclass(frozen=True)
-class _Setup:
-    """:func:`plan`'s arguments, checked (and the goal configuration found): what each of its
-    phases reads."""
-
-    robot: Robot
-    q0: NDArray[np.float64]
-    qe: NDArray[np.float64]
-    goal: ToolPose | None
-    cost: Cost
-    method: Method
-    options: SCPOptions | PaperOptions
-    grid: int
-    max_iterations: int
-    velocity_limits: bool
-    position_limits: bool
-    collisions: CollisionModel | None
-    vias: list[NDArray[np.float64]]
-    optimise_goal: bool
-    t_start: float
-    deadline: float
 
 
 def _setup(
@@ -223,7 +198,7 @@ def _setup(
     optimise_goal: bool,
     via: Sequence[ArrayLike | ToolPose] | None,
     t_start: float,
-) -> _Setup:
+) -> Segment:
     """Check :func:`plan`'s arguments (see there for what it raises), find the goal
     configuration of a pose and the collision model."""
     if not isinstance(robot, Robot):
@@ -274,7 +249,7 @@ def _setup(
         collisions.check_configuration(qe, "goal configuration qe")
         for k_via, q_via in enumerate(vias):
             collisions.check_configuration(q_via, f"via-point {k_via}")
-    return _Setup(
+    return Segment(
         robot,
         q0,
         qe,
@@ -294,89 +269,7 @@ def _setup(
     )
 
 
-def _first_path(setup: _Setup) -> tuple[Path, Path | None, tuple[float, ...]]:
-    """The path stage 2 starts from: the straight line, the B-spline through the via-points,
-    or (where it collides) the best of a few OMPL paths. Returns it, the start given to stage 2
-    (None: the straight line) and the via-points' σ."""
-    robot, q0, qe, cost, options = setup.robot, setup.q0, setup.qe, setup.cost, setup.options
-    vias, collisions, method = setup.vias, setup.collisions, setup.method
-    position_limits, velocity_limits = setup.position_limits, setup.velocity_limits
-    max_iterations, deadline = setup.max_iterations, setup.deadline
-    line: Path = StraightPath(q0, qe)
-    start = None
-    via_s: tuple[float, ...] = ()
-    if vias:
-        points = np.vstack([q0, *vias, qe])
-        if np.any(np.all(np.diff(points, axis=0) == 0.0, axis=1)):
-            raise ConfigurationError("two consecutive points (start, via-points, goal) are equal")
-        k = max(options.control_points, 4 * (len(vias) + 1))
-        bounds = _bounds(robot, position_limits)
-        start, sigma = path_through(points, k, knot_breaks(options, k), None, *bounds)
-        _check_inside(robot, start, bounds)
-        line, via_s = start, tuple(float(x) for x in sigma)
-    if collisions is not None:
-        if vias and not collisions.path_clearance(line).certified:
-            start, sigma = _around_obstacles(
-                collisions,
-                points,
-                options,
-                bounds,
-                min(max(0.25 * (deadline - time.perf_counter()), 1e-3), 5.0),
-            )
-            line, via_s = start, tuple(float(x) for x in sigma)
-        if not vias and not collisions.path_clearance(line).certified:
-            k = options.control_points
-            breaks = knot_breaks(options, k)
-            # a few OMPL paths (around the obstacles on different sides), the cheapest first
-            starts = collision_free_path(
-                collisions,
-                q0,
-                qe,
-                control_points=k,
-                breaks=breaks,
-                attempts=5,
-                time_limit=min(max(0.25 * (deadline - time.perf_counter()), 1e-3), 5.0),
-            )
-            timed = []
-            for candidate in starts:
-                try:
-                    timed.append(
-                        (
-                            optimal_timing(
-                                robot,
-                                candidate,
-                                cost,
-                                grid=options.grid,
-                                velocity_limits=velocity_limits,
-                            ).J,
-                            candidate,
-                        )
-                    )
-                except (InfeasiblePathError, SolverError):
-                    continue
-            if not timed:
-                raise InfeasiblePathError(
-                    "no collision-free path OMPL found can be timed within the limits"
-                )
-            timed.sort(key=lambda x: x[0])
-            start = line = timed[0][1]
-            if method == Method.SCP and max_iterations > SCREENING and len(timed) > 1:
-                line, start = _screen(
-                    robot,
-                    q0,
-                    qe,
-                    cost,
-                    [c for _, c in timed[:3]],
-                    velocity_limits=velocity_limits,
-                    position_limits=position_limits,
-                    options=options,
-                    collisions=collisions,
-                    deadline=deadline,
-                )
-    return line, start, via_s
-
-
-def _time_first_path(setup: _Setup, line: Path, start: Path | None) -> TimingResult:
+def _time_first_path(setup: Segment, line: Path, start: Path | None) -> TimingResult:
     """Stage 1 on the first path, on the plan's grid."""
     robot, cost, grid = setup.robot, setup.cost, setup.grid
     velocity_limits, deadline = setup.velocity_limits, setup.deadline
@@ -396,7 +289,7 @@ def _time_first_path(setup: _Setup, line: Path, start: Path | None) -> TimingRes
 
 
 def _improve(
-    setup: _Setup,
+    setup: Segment,
     line: Path,
     start: Path | None,
     via_s: tuple[float, ...],
@@ -468,7 +361,7 @@ def _improve(
 
 
 def _result(
-    setup: _Setup,
+    setup: Segment,
     timing: TimingResult,
     initial: TimingResult,
     history: list[Iteration],
@@ -496,82 +389,6 @@ def _result(
         via=tuple(vias),
         via_s=via_s,
     )
-
-
-def _around_obstacles(
-    collisions: CollisionModel,
-    points: NDArray[np.float64],
-    options: SCPOptions,
-    bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
-    time_limit: float,
-) -> tuple[BSplinePath, NDArray[np.float64]]:
-    """A first path through via-points whose straight legs collide: each colliding leg is an
-    OMPL path (RRT-Connect, certified, fitted), the legs joined into one polyline and the
-    B-spline along it through the via-points exactly; certified, with more control points if
-    the first does not keep the margin. Returns it and the σ of the via-points."""
-    legs = len(points) - 1
-    polyline, exact = [points[:1]], []
-    for a, b in zip(points[:-1], points[1:], strict=True):
-        if collisions.path_clearance(StraightPath(a, b)).certified:
-            piece = b[None, :]
-        else:
-            found = collision_free_path(
-                collisions,
-                a,
-                b,
-                control_points=options.control_points,
-                breaks=None,
-                time_limit=time_limit / legs,
-                attempts=1,
-            )
-            piece = found[0](np.linspace(0.0, 1.0, 4 * options.control_points + 1)[1:], 0)
-        polyline.append(piece)
-        exact.append(sum(len(p) for p in polyline) - 1)
-    dense = np.vstack(polyline)
-    k0 = max(options.control_points, 4 * legs)
-    for k in (k0, 2 * k0, 4 * k0, 8 * k0):
-        if k > MAX_CONTROL_POINTS:
-            break
-        path, sigma = path_through(
-            dense, k, knot_breaks(options, k) if k == k0 else None, exact[:-1], *bounds
-        )
-        if collisions.path_clearance(path).certified:
-            _check_inside(collisions.robot, path, bounds)
-            return path, sigma
-    raise CollisionError(
-        "no B-spline through the via-points keeps the margin along the collision-free legs "
-        f"OMPL found (tried up to {min(8 * k0, MAX_CONTROL_POINTS)} control points)"
-    )
-
-
-def _bounds(
-    robot: Robot, position_limits: bool
-) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
-    """The position limits a first path through via-points keeps, when they are enforced."""
-    if not position_limits:
-        return None, None
-    return robot.limits.position_lower, robot.limits.position_upper
-
-
-def _check_inside(
-    robot: Robot,
-    path: BSplinePath,
-    bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
-) -> None:
-    """A first path whose control points leave the position limits is refused, naming the
-    joint (its curve could leave them; stage 2 starts from feasible paths only)."""
-    lower, upper = bounds
-    if lower is None or upper is None:
-        return
-    c = path.control_points
-    excess = np.maximum(lower - c, c - upper)
-    k, j = np.unravel_index(np.argmax(excess), excess.shape)
-    if excess[k, j] > 1e-9:
-        raise InfeasiblePathError(
-            f"no first path through the via-points keeps joint {robot.joint_names[j]!r} within "
-            f"its position limits [{lower[j]:.6g}, {upper[j]:.6g}] (a control point at "
-            f"{c[k, j]:.6g}): move the via-points away from the limit"
-        )
 
 
 def _via_points(
@@ -673,49 +490,6 @@ def _free_goal(
     return MethodOutcome(
         second.timing, second.reason, second.message, first.evaluations + second.evaluations
     )
-
-
-def _screen(
-    robot: Robot,
-    q0: NDArray[np.float64],
-    qe: NDArray[np.float64],
-    cost: Cost,
-    candidates: list[BSplinePath],
-    *,
-    velocity_limits: bool,
-    position_limits: bool,
-    options: SCPOptions,
-    collisions: CollisionModel,
-    deadline: float,
-) -> tuple[BSplinePath, BSplinePath]:
-    """The first path stage 2 continues from: each OMPL candidate improved by
-    :data:`SCREENING` iterations on the iterate grid, the best kept (the order of the candidates'
-    own J predicts the optimum's poorly: ±15 % on panda in a cell). Returns the chosen candidate
-    and its improved path."""
-    best: tuple[float, BSplinePath, BSplinePath] | None = None
-    for candidate in candidates:
-        try:
-            outcome = sequential_convex(
-                robot,
-                q0,
-                qe,
-                cost,
-                grid=options.grid,
-                velocity_limits=velocity_limits,
-                position_limits=position_limits,
-                options=options,
-                run=Run(SCREENING, deadline, time.perf_counter(), lambda *_: None),
-                collisions=collisions,
-                start=candidate,
-            )
-        except (InfeasiblePathError, SolverError):
-            continue
-        path = outcome.timing.trajectory.path
-        if best is None or outcome.timing.J < best[0]:
-            best = (outcome.timing.J, candidate, path)  # type: ignore[assignment]
-    if best is None:
-        return candidates[0], candidates[0]
-    return best[1], best[2]
 
 
 def _certify(collisions: CollisionModel, path: Path) -> Clearance:

@@ -27,6 +27,8 @@ if TYPE_CHECKING:
     from ..verify import Waypoint
 
 __all__ = [
+    "MAX_CONTROL_POINTS",
+    "Segment",
     "Method",
     "StopReason",
     "SCPOptions",
@@ -36,6 +38,9 @@ __all__ = [
     "MethodOutcome",
     "PlanResult",
 ]
+
+
+MAX_CONTROL_POINTS = 200  # interior B-spline control points; the convex model grows with K·n
 
 
 class Method(StrEnum):
@@ -127,6 +132,30 @@ class PaperOptions:
     delta_t: float = 0.1
     trials: int = 8
     tolerance: float = 1e-7
+
+
+@dataclass(frozen=True)
+class Segment:
+    """One rest-to-rest plan, its arguments checked (the goal configuration found, the
+    collision model built): what each phase of :func:`~nearopt.plan` reads (the first path,
+    stage 2, the result)."""
+
+    robot: Robot
+    q0: NDArray[np.float64]
+    qe: NDArray[np.float64]
+    goal: ToolPose | None
+    cost: Cost
+    method: Method
+    options: SCPOptions | PaperOptions
+    grid: int
+    max_iterations: int
+    velocity_limits: bool
+    position_limits: bool
+    collisions: CollisionModel | None
+    vias: list[NDArray[np.float64]]
+    optimise_goal: bool
+    t_start: float
+    deadline: float
 
 
 @dataclass(frozen=True)

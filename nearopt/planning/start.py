@@ -1,0 +1,237 @@
+"""The path stage 2 starts from: the straight joint line (eqs. 28-29), the B-spline through
+via-points, or, where either collides, the best of a few OMPL paths (RRT-Connect), each improved
+by a few stage-2 iterations before the best is continued.
+"""
+
+from __future__ import annotations
+
+import time
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ..collision.sampling import collision_free_path
+from ..errors import CollisionError, ConfigurationError, InfeasiblePathError, SolverError
+from ..path import BSplinePath, Path, StraightPath
+from ..timing import optimal_timing
+from .records import MAX_CONTROL_POINTS, Method, Run, SCPOptions, Segment
+from .scp import knot_breaks, path_through, sequential_convex
+
+if TYPE_CHECKING:
+    from numpy.typing import NDArray
+
+    from ..collision import CollisionModel
+    from ..cost import Cost
+    from ..robot import Robot
+
+__all__ = [
+    "first_path",
+    "screen",
+    "around_obstacles",
+    "position_bounds",
+    "check_inside",
+    "SCREENING",
+]
+
+SCREENING = 6  # stage-2 iterations from each OMPL path before the best is continued
+
+
+def first_path(setup: Segment) -> tuple[Path, Path | None, tuple[float, ...]]:
+    """The path stage 2 starts from: the straight line, the B-spline through the via-points,
+    or (where it collides) the best of a few OMPL paths. Returns it, the start given to stage 2
+    (None: the straight line) and the via-points' σ."""
+    robot, q0, qe, cost, options = setup.robot, setup.q0, setup.qe, setup.cost, setup.options
+    vias, collisions, method = setup.vias, setup.collisions, setup.method
+    position_limits, velocity_limits = setup.position_limits, setup.velocity_limits
+    max_iterations, deadline = setup.max_iterations, setup.deadline
+    line: Path = StraightPath(q0, qe)
+    start = None
+    via_s: tuple[float, ...] = ()
+    if vias:
+        points = np.vstack([q0, *vias, qe])
+        if np.any(np.all(np.diff(points, axis=0) == 0.0, axis=1)):
+            raise ConfigurationError("two consecutive points (start, via-points, goal) are equal")
+        k = max(options.control_points, 4 * (len(vias) + 1))
+        bounds = position_bounds(robot, position_limits)
+        start, sigma = path_through(points, k, knot_breaks(options, k), None, *bounds)
+        check_inside(robot, start, bounds)
+        line, via_s = start, tuple(float(x) for x in sigma)
+    if collisions is not None:
+        if vias and not collisions.path_clearance(line).certified:
+            start, sigma = around_obstacles(
+                collisions,
+                points,
+                options,
+                bounds,
+                min(max(0.25 * (deadline - time.perf_counter()), 1e-3), 5.0),
+            )
+            line, via_s = start, tuple(float(x) for x in sigma)
+        if not vias and not collisions.path_clearance(line).certified:
+            k = options.control_points
+            breaks = knot_breaks(options, k)
+            # a few OMPL paths (around the obstacles on different sides), the cheapest first
+            starts = collision_free_path(
+                collisions,
+                q0,
+                qe,
+                control_points=k,
+                breaks=breaks,
+                attempts=5,
+                time_limit=min(max(0.25 * (deadline - time.perf_counter()), 1e-3), 5.0),
+            )
+            timed = []
+            for candidate in starts:
+                try:
+                    timed.append(
+                        (
+                            optimal_timing(
+                                robot,
+                                candidate,
+                                cost,
+                                grid=options.grid,
+                                velocity_limits=velocity_limits,
+                            ).J,
+                            candidate,
+                        )
+                    )
+                except (InfeasiblePathError, SolverError):
+                    continue
+            if not timed:
+                raise InfeasiblePathError(
+                    "no collision-free path OMPL found can be timed within the limits"
+                )
+            timed.sort(key=lambda x: x[0])
+            start = line = timed[0][1]
+            if method == Method.SCP and max_iterations > SCREENING and len(timed) > 1:
+                line, start = screen(
+                    robot,
+                    q0,
+                    qe,
+                    cost,
+                    [c for _, c in timed[:3]],
+                    velocity_limits=velocity_limits,
+                    position_limits=position_limits,
+                    options=options,
+                    collisions=collisions,
+                    deadline=deadline,
+                )
+    return line, start, via_s
+
+
+def screen(
+    robot: Robot,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    cost: Cost,
+    candidates: list[BSplinePath],
+    *,
+    velocity_limits: bool,
+    position_limits: bool,
+    options: SCPOptions,
+    collisions: CollisionModel,
+    deadline: float,
+) -> tuple[BSplinePath, BSplinePath]:
+    """The first path stage 2 continues from: each OMPL candidate improved by
+    :data:`SCREENING` iterations on the iterate grid, the best kept (the order of the candidates'
+    own J predicts the optimum's poorly: ±15 % on panda in a cell). Returns the chosen candidate
+    and its improved path."""
+    best: tuple[float, BSplinePath, BSplinePath] | None = None
+    for candidate in candidates:
+        try:
+            outcome = sequential_convex(
+                robot,
+                q0,
+                qe,
+                cost,
+                grid=options.grid,
+                velocity_limits=velocity_limits,
+                position_limits=position_limits,
+                options=options,
+                run=Run(SCREENING, deadline, time.perf_counter(), lambda *_: None),
+                collisions=collisions,
+                start=candidate,
+            )
+        except (InfeasiblePathError, SolverError):
+            continue
+        path = outcome.timing.trajectory.path
+        if best is None or outcome.timing.J < best[0]:
+            best = (outcome.timing.J, candidate, path)  # type: ignore[assignment]
+    if best is None:
+        return candidates[0], candidates[0]
+    return best[1], best[2]
+
+
+def around_obstacles(
+    collisions: CollisionModel,
+    points: NDArray[np.float64],
+    options: SCPOptions,
+    bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
+    time_limit: float,
+) -> tuple[BSplinePath, NDArray[np.float64]]:
+    """A first path through via-points whose straight legs collide: each colliding leg is an
+    OMPL path (RRT-Connect, certified, fitted), the legs joined into one polyline and the
+    B-spline along it through the via-points exactly; certified, with more control points if
+    the first does not keep the margin. Returns it and the σ of the via-points."""
+    legs = len(points) - 1
+    polyline, exact = [points[:1]], []
+    for a, b in zip(points[:-1], points[1:], strict=True):
+        if collisions.path_clearance(StraightPath(a, b)).certified:
+            piece = b[None, :]
+        else:
+            found = collision_free_path(
+                collisions,
+                a,
+                b,
+                control_points=options.control_points,
+                breaks=None,
+                time_limit=time_limit / legs,
+                attempts=1,
+            )
+            piece = found[0](np.linspace(0.0, 1.0, 4 * options.control_points + 1)[1:], 0)
+        polyline.append(piece)
+        exact.append(sum(len(p) for p in polyline) - 1)
+    dense = np.vstack(polyline)
+    k0 = max(options.control_points, 4 * legs)
+    for k in (k0, 2 * k0, 4 * k0, 8 * k0):
+        if k > MAX_CONTROL_POINTS:
+            break
+        path, sigma = path_through(
+            dense, k, knot_breaks(options, k) if k == k0 else None, exact[:-1], *bounds
+        )
+        if collisions.path_clearance(path).certified:
+            check_inside(collisions.robot, path, bounds)
+            return path, sigma
+    raise CollisionError(
+        "no B-spline through the via-points keeps the margin along the collision-free legs "
+        f"OMPL found (tried up to {min(8 * k0, MAX_CONTROL_POINTS)} control points)"
+    )
+
+
+def position_bounds(
+    robot: Robot, position_limits: bool
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """The position limits a first path through via-points keeps, when they are enforced."""
+    if not position_limits:
+        return None, None
+    return robot.limits.position_lower, robot.limits.position_upper
+
+
+def check_inside(
+    robot: Robot,
+    path: BSplinePath,
+    bounds: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
+) -> None:
+    """A first path whose control points leave the position limits is refused, naming the
+    joint (its curve could leave them; stage 2 starts from feasible paths only)."""
+    lower, upper = bounds
+    if lower is None or upper is None:
+        return
+    c = path.control_points
+    excess = np.maximum(lower - c, c - upper)
+    k, j = np.unravel_index(np.argmax(excess), excess.shape)
+    if excess[k, j] > 1e-9:
+        raise InfeasiblePathError(
+            f"no first path through the via-points keeps joint {robot.joint_names[j]!r} within "
+            f"its position limits [{lower[j]:.6g}, {upper[j]:.6g}] (a control point at "
+            f"{c[k, j]:.6g}): move the via-points away from the limit"
+        )
