@@ -39,6 +39,12 @@ ROUNDING = 1e-13  # relative error of a sum of a few hundred terms in double pre
 FAST = {"nsz", "arcp", "contract", "reassoc"}
 
 
+def _inline(**options: object):  # noqa: ANN202 - numba's decorator
+    """A helper of a kernel, inlined into it by numba before compilation (the same machine code
+    as one function: the kernel's sums are reassociated as before)."""
+    return numba.njit(inline="always", **options)
+
+
 @_jit(fastmath=FAST, error_model="numpy")
 def iterate(
     z,
@@ -73,7 +79,6 @@ def iterate(
     """
     big_n = ds.size
     m = left.size
-    ne = e_left.size
     nf = big_n - 1
     b = np.zeros(big_n + 1)
     lam = np.zeros(big_n + 1)
@@ -95,208 +100,28 @@ def iterate(
     dzx = np.zeros(big_n + 1)  # Δb on every knot (0 at the ends)
     dd = np.zeros(nf)
     ll = np.zeros(nf)
-    q = np.zeros(big_n)
-    ql = np.zeros(big_n)
-    qr = np.zeros(big_n)
-    qll = np.zeros(big_n)
-    qrr = np.zeros(big_n)
-    qlr = np.zeros(big_n)
+    q = np.zeros((6, big_n))  # the energy term per segment: q, q_l, q_r, q_ll, q_rr, q_lr
     f_total = 0.0
     for it in range(iterations):
-        # ---------------------------------------------------------- the objective at z
-        for k in range(1, big_n):
-            b[k] = z[k - 1]
-            lam[k] = np.sqrt(z[k - 1])
-            hinv[k] = 0.5 / lam[k]
-            croot[k] = -0.25 / (lam[k] * lam[k] * lam[k])
-        for k in range(big_n + 1):
-            hdiag[k] = 0.0
-            rd[k] = 0.0
-            rd_size[k] = 0.0
-            rhs[k] = 0.0
-        for k in range(big_n):
-            hoff[k] = 0.0
-            q[k] = 0.0
-            ql[k] = 0.0
-            qr[k] = 0.0
-            qll[k] = 0.0
-            qrr[k] = 0.0
-            qlr[k] = 0.0
-        for j in range(ne):
-            k = e_left[j]
-            nd = e_node[j]
-            u = e_cl[j] * b[k] + e_cr[j] * b[k + 1] + e_d[j] * lam[nd] + e_const[j]
-            ul = e_cl[j]
-            ur = e_cr[j]
-            curv = 0.0
-            if e_d[j] != 0.0:
-                if nd == k:
-                    ul += e_d[j] * hinv[nd]
-                else:
-                    ur += e_d[j] * hinv[nd]
-                curv = e_d[j] * croot[nd]
-            wt = e_w[j]
-            q[k] += 0.5 * wt * u * u
-            ql[k] += wt * u * ul
-            qr[k] += wt * u * ur
-            qll[k] += wt * ul * ul
-            qrr[k] += wt * ur * ur
-            qlr[k] += wt * ul * ur
-            if curv != 0.0:
-                if nd == k:
-                    qll[k] += wt * u * curv
-                else:
-                    qrr[k] += wt * u * curv
-        f_total = 0.0
-        for k in range(big_n):
-            sl = lam[k] + lam[k + 1]
-            t = 2.0 * ds[k] / sl
-            dt = -t / sl
-            d2 = 2.0 * t / (sl * sl)
-            hl = hinv[k]
-            hr = hinv[k + 1]
-            tl = dt * hl
-            tr = dt * hr
-            one = 1.0 + q[k]
-            f_total += t * one
-            grad_l = (tl * one + t * ql[k]) * f_scale
-            grad_r = (tr * one + t * qr[k]) * f_scale
-            rd[k] += grad_l
-            rd[k + 1] += grad_r
-            rd_size[k] += abs(grad_l)
-            rd_size[k + 1] += abs(grad_r)
-            hdiag[k] += (d2 * hl * hl + dt * croot[k]) * one * f_scale
-            hdiag[k] += (2.0 * tl * ql[k] + t * qll[k]) * f_scale
-            hdiag[k + 1] += (d2 * hr * hr + dt * croot[k + 1]) * one * f_scale
-            hdiag[k + 1] += (2.0 * tr * qr[k] + t * qrr[k]) * f_scale
-            hoff[k] += (d2 * hl * hr * one + tl * qr[k] + tr * ql[k] + t * qlr[k]) * f_scale
-        # ---------------------------------------------------------- pass 1 over the rows
-        gap = 0.0
-        rp_max = 0.0
-        for j in range(m):
-            k = left[j]
-            nd = node[j]
-            g_l = cl[j]
-            g_r = cr[j]
-            c = g_l * b[k] + g_r * b[k + 1] + const[j]
-            size_j = abs(g_l * b[k]) + abs(g_r * b[k + 1]) + abs(const[j]) + s[j]
-            if sd[j] != 0.0:
-                c += sd[j] * lam[nd]
-                size_j += abs(sd[j] * lam[nd])
-                if nd == k:
-                    g_l += sd[j] * hinv[nd]
-                else:
-                    g_r += sd[j] * hinv[nd]
-                hdiag[nd] += y[j] * sd[j] * croot[nd]  # the row's curvature, times its multiplier
-            gl[j] = g_l
-            gr[j] = g_r
-            r = c + s[j]
-            rp[j] = r
-            # the residual beyond the rounding error of the row's terms (they nearly cancel
-            # where the segments are short: coefficients ∝ 1/Δσ)
-            rp_max = max(rp_max, abs(r) - ROUNDING * size_j)
-            yj = y[j]
-            rd[k] += g_l * yj
-            rd[k + 1] += g_r * yj
-            rd_size[k] += abs(g_l * yj)
-            rd_size[k + 1] += abs(g_r * yj)
-            gap += s[j] * yj
-            inv = 1.0 / s[j]
-            inv_s[j] = inv
-            wj = yj * inv
-            w[j] = wj
-            hdiag[k] += wj * g_l * g_l
-            hdiag[k + 1] += wj * g_r * g_r
-            hoff[k] += wj * g_l * g_r
-            v = yj - wj * r  # (s y − y r) / s: the predictor's complementarity target is 0
-            rhs[k] += g_l * v
-            rhs[k + 1] += g_r * v
+        _at(z, b, lam, hinv, croot, hdiag, rd, rd_size, rhs, hoff, q)
+        _energy_sums(e_left, e_cl, e_cr, e_d, e_node, e_const, e_w, b, lam, hinv, croot, q)
+        f_total = _objective(ds, lam, hinv, croot, q, f_scale, rd, rd_size, hdiag, hoff)
+        gap, rp_max = _rows(
+            z, s, y, left, cl, cr, sd, node, const, b, lam, hinv, croot,
+            gl, gr, rp, w, inv_s, rd, rd_size, hdiag, hoff, rhs,
+        )  # fmt: skip
         rd_max = 0.0
         for k in range(1, big_n):
             rd_max = max(rd_max, (abs(rd[k]) - ROUNDING * rd_size[k]) * scale[k - 1])
-        mu = gap / m
         rel = f_total * f_scale
         if gap <= tolerance * rel and rd_max <= tolerance * rel and rp_max <= tolerance:
             return CONVERGED, it, f_total
-        # ---------------------------------------------------------- L D Lᵀ of D M D
-        size = 0.0
-        for i in range(nf):
-            if abs(hdiag[i + 1] * scale[i] * scale[i]) > size:
-                size = abs(hdiag[i + 1] * scale[i] * scale[i])
-        delta = 0.0
-        ok = False
-        for _attempt in range(14):
-            ok = True
-            for i in range(nf):
-                dd[i] = hdiag[i + 1] * scale[i] * scale[i] + delta * size
-                if i > 0:
-                    off = hoff[i] * scale[i - 1] * scale[i]
-                    ll[i] = off / dd[i - 1]
-                    dd[i] -= ll[i] * off
-                if not dd[i] > 0.0:
-                    ok = False
-                    break
-            if ok:
-                break
-            delta = 1e-12 if delta == 0.0 else 10.0 * delta
-        if not ok:
+        if not _factor(hdiag, hoff, scale, dd, ll):
             return SINGULAR, it, f_total
-        step = 0.0
-        sigma_mu = 0.0
-        for phase in range(2):
-            # solve L D Lᵀ x = D (−rd + rhs), dz = D x
-            for i in range(nf):
-                dz[i] = (-rd[i + 1] + rhs[i + 1]) * scale[i]
-                if i > 0:
-                    dz[i] -= ll[i] * dz[i - 1]
-            for i in range(nf - 1, -1, -1):
-                dz[i] /= dd[i]
-                if i < nf - 1:
-                    dz[i] -= ll[i + 1] * dz[i + 1]
-            # b may at most halve in one step (1/√b is far from its tangent below that), and
-            # the slacks and multipliers stay positive
-            largest_z = np.inf
-            for i in range(nf):
-                dz[i] *= scale[i]
-                dzx[i + 1] = dz[i]
-                ratio = -0.5 * z[i] / dz[i]
-                largest_z = min(largest_z, ratio if dz[i] < 0.0 else np.inf)
-            largest = np.inf
-            cross = 0.0  # Σ s Δy + y Δs
-            square = 0.0  # Σ Δs Δy
-            for j in range(m):
-                k = left[j]
-                jdz = gl[j] * dzx[k] + gr[j] * dzx[k + 1]
-                d_s = -rp[j] - jdz
-                if phase == 0:
-                    d_y = -y[j] + w[j] * (rp[j] + jdz)
-                else:
-                    d_y = dy[j] + w[j] * jdz  # dy holds the corrector's constant part
-                dsl[j] = d_s
-                dy[j] = d_y
-                r_s = -s[j] / d_s  # branch-free: the sign of a step is unpredictable
-                r_y = -y[j] / d_y
-                largest = min(
-                    largest, min(r_s if d_s < 0.0 else np.inf, r_y if d_y < 0.0 else np.inf)
-                )
-                if phase == 0:
-                    cross += s[j] * d_y + y[j] * d_s
-                    square += d_s * d_y
-            if phase == 0:
-                step = min(1.0, largest, largest_z)
-                mu_aff = (gap + step * cross + step * step * square) / m
-                sigma_mu = (mu_aff / mu) ** 3 * mu
-                # the corrector: complementarity target s y + Δs Δy − σμ
-                for k in range(big_n + 1):
-                    rhs[k] = 0.0
-                for j in range(m):
-                    comp = s[j] * y[j] + dsl[j] * dy[j] - sigma_mu
-                    v = (comp - y[j] * rp[j]) * inv_s[j]
-                    rhs[left[j]] += gl[j] * v
-                    rhs[left[j] + 1] += gr[j] * v
-                    dy[j] = (-comp + y[j] * rp[j]) * inv_s[j]
-            else:
-                step = min(1.0, tau * largest, largest_z)
+        step = _step(
+            z, s, y, left, gl, gr, rp, w, inv_s, rd, rhs, scale, dd, ll,
+            dz, dzx, dsl, dy, gap / m, gap, tau,
+        )  # fmt: skip
         for i in range(nf):
             z[i] += step * dz[i]
             if not np.isfinite(z[i]):
@@ -305,6 +130,232 @@ def iterate(
             s[j] += step * dsl[j]
             y[j] += step * dy[j]
     return RUNNING, iterations, f_total
+
+
+@_inline(fastmath=FAST, error_model="numpy")
+def _at(z, b, lam, hinv, croot, hdiag, rd, rd_size, rhs, hoff, q):  # pragma: no cover
+    """b, λ = √b, 1/(2λ) and −1/(4λ³) at the knots from z; the sums of an iteration zeroed."""
+    big_n = hoff.size
+    for k in range(1, big_n):
+        b[k] = z[k - 1]
+        lam[k] = np.sqrt(z[k - 1])
+        hinv[k] = 0.5 / lam[k]
+        croot[k] = -0.25 / (lam[k] * lam[k] * lam[k])
+    for k in range(big_n + 1):
+        hdiag[k] = 0.0
+        rd[k] = 0.0
+        rd_size[k] = 0.0
+        rhs[k] = 0.0
+    for k in range(big_n):
+        hoff[k] = 0.0
+        for i in range(6):
+            q[i, k] = 0.0
+
+
+@_inline(fastmath=FAST, error_model="numpy")
+def _energy_sums(
+    e_left, e_cl, e_cr, e_d, e_node, e_const, e_w, b, lam, hinv, croot, q
+):  # pragma: no cover - compiled
+    """The energy term ½ Σ w u² of every segment and its derivatives in the segment's two b."""
+    for j in range(e_left.size):
+        k = e_left[j]
+        nd = e_node[j]
+        u = e_cl[j] * b[k] + e_cr[j] * b[k + 1] + e_d[j] * lam[nd] + e_const[j]
+        ul = e_cl[j]
+        ur = e_cr[j]
+        curv = 0.0
+        if e_d[j] != 0.0:
+            if nd == k:
+                ul += e_d[j] * hinv[nd]
+            else:
+                ur += e_d[j] * hinv[nd]
+            curv = e_d[j] * croot[nd]
+        wt = e_w[j]
+        q[0, k] += 0.5 * wt * u * u
+        q[1, k] += wt * u * ul
+        q[2, k] += wt * u * ur
+        q[3, k] += wt * ul * ul
+        q[4, k] += wt * ur * ur
+        q[5, k] += wt * ul * ur
+        if curv != 0.0:
+            if nd == k:
+                q[3, k] += wt * u * curv
+            else:
+                q[4, k] += wt * u * curv
+
+
+@_inline(fastmath=FAST, error_model="numpy")
+def _objective(ds, lam, hinv, croot, q, f_scale, rd, rd_size, hdiag, hoff):  # pragma: no cover
+    """F = Σ t_k (1 + q_k) with t_k = 2Δσ_k / (λ_k + λ_k+1), its gradient into rd and its
+    Hessian into hdiag, hoff; returns F."""
+    f_total = 0.0
+    for k in range(ds.size):
+        sl = lam[k] + lam[k + 1]
+        t = 2.0 * ds[k] / sl
+        dt = -t / sl
+        d2 = 2.0 * t / (sl * sl)
+        hl = hinv[k]
+        hr = hinv[k + 1]
+        tl = dt * hl
+        tr = dt * hr
+        one = 1.0 + q[0, k]
+        f_total += t * one
+        grad_l = (tl * one + t * q[1, k]) * f_scale
+        grad_r = (tr * one + t * q[2, k]) * f_scale
+        rd[k] += grad_l
+        rd[k + 1] += grad_r
+        rd_size[k] += abs(grad_l)
+        rd_size[k + 1] += abs(grad_r)
+        hdiag[k] += (d2 * hl * hl + dt * croot[k]) * one * f_scale
+        hdiag[k] += (2.0 * tl * q[1, k] + t * q[3, k]) * f_scale
+        hdiag[k + 1] += (d2 * hr * hr + dt * croot[k + 1]) * one * f_scale
+        hdiag[k + 1] += (2.0 * tr * q[2, k] + t * q[4, k]) * f_scale
+        hoff[k] += (d2 * hl * hr * one + tl * q[2, k] + tr * q[1, k] + t * q[5, k]) * f_scale
+    return f_total
+
+
+@_inline(fastmath=FAST, error_model="numpy")
+def _rows(
+    z, s, y, left, cl, cr, sd, node, const, b, lam, hinv, croot,
+    gl, gr, rp, w, inv_s, rd, rd_size, hdiag, hoff, rhs,
+):  # fmt: skip  # pragma: no cover - compiled
+    """Pass 1 over the rows: values, derivatives, residuals, the Newton matrix and the
+    predictor's right-hand side. Returns (Σ s y, the largest residual beyond rounding)."""
+    gap = 0.0
+    rp_max = 0.0
+    for j in range(left.size):
+        k = left[j]
+        nd = node[j]
+        g_l = cl[j]
+        g_r = cr[j]
+        c = g_l * b[k] + g_r * b[k + 1] + const[j]
+        size_j = abs(g_l * b[k]) + abs(g_r * b[k + 1]) + abs(const[j]) + s[j]
+        if sd[j] != 0.0:
+            c += sd[j] * lam[nd]
+            size_j += abs(sd[j] * lam[nd])
+            if nd == k:
+                g_l += sd[j] * hinv[nd]
+            else:
+                g_r += sd[j] * hinv[nd]
+            hdiag[nd] += y[j] * sd[j] * croot[nd]  # the row's curvature, times its multiplier
+        gl[j] = g_l
+        gr[j] = g_r
+        r = c + s[j]
+        rp[j] = r
+        # the residual beyond the rounding error of the row's terms (they nearly cancel
+        # where the segments are short: coefficients ∝ 1/Δσ)
+        rp_max = max(rp_max, abs(r) - ROUNDING * size_j)
+        yj = y[j]
+        rd[k] += g_l * yj
+        rd[k + 1] += g_r * yj
+        rd_size[k] += abs(g_l * yj)
+        rd_size[k + 1] += abs(g_r * yj)
+        gap += s[j] * yj
+        inv = 1.0 / s[j]
+        inv_s[j] = inv
+        wj = yj * inv
+        w[j] = wj
+        hdiag[k] += wj * g_l * g_l
+        hdiag[k + 1] += wj * g_r * g_r
+        hoff[k] += wj * g_l * g_r
+        v = yj - wj * r  # (s y − y r) / s: the predictor's complementarity target is 0
+        rhs[k] += g_l * v
+        rhs[k + 1] += g_r * v
+    return gap, rp_max
+
+
+@_inline(fastmath=FAST, error_model="numpy")
+def _factor(hdiag, hoff, scale, dd, ll):  # pragma: no cover - compiled
+    """L D Lᵀ of D M D (M tridiagonal: hdiag, hoff; D = diag(scale)) into dd, ll, shifted by
+    the smallest multiple of its size that makes it positive definite; False if none does."""
+    nf = dd.size
+    size = 0.0
+    for i in range(nf):
+        if abs(hdiag[i + 1] * scale[i] * scale[i]) > size:
+            size = abs(hdiag[i + 1] * scale[i] * scale[i])
+    delta = 0.0
+    ok = False
+    for _attempt in range(14):
+        ok = True
+        for i in range(nf):
+            dd[i] = hdiag[i + 1] * scale[i] * scale[i] + delta * size
+            if i > 0:
+                off = hoff[i] * scale[i - 1] * scale[i]
+                ll[i] = off / dd[i - 1]
+                dd[i] -= ll[i] * off
+            if not dd[i] > 0.0:
+                ok = False
+                break
+        if ok:
+            break
+        delta = 1e-12 if delta == 0.0 else 10.0 * delta
+    return ok
+
+
+@_inline(fastmath=FAST, error_model="numpy")
+def _step(
+    z, s, y, left, gl, gr, rp, w, inv_s, rd, rhs, scale, dd, ll,
+    dz, dzx, dsl, dy, mu, gap, tau,
+):  # fmt: skip  # pragma: no cover - compiled
+    """The predictor's direction and step, the corrector's right-hand side, then the
+    corrector's direction (into dz, dsl, dy) and its step, which it returns."""
+    nf = dz.size
+    m = left.size
+    step = 0.0
+    sigma_mu = 0.0
+    for phase in range(2):
+        # solve L D Lᵀ x = D (−rd + rhs), dz = D x
+        for i in range(nf):
+            dz[i] = (-rd[i + 1] + rhs[i + 1]) * scale[i]
+            if i > 0:
+                dz[i] -= ll[i] * dz[i - 1]
+        for i in range(nf - 1, -1, -1):
+            dz[i] /= dd[i]
+            if i < nf - 1:
+                dz[i] -= ll[i + 1] * dz[i + 1]
+        # b may at most halve in one step (1/√b is far from its tangent below that), and
+        # the slacks and multipliers stay positive
+        largest_z = np.inf
+        for i in range(nf):
+            dz[i] *= scale[i]
+            dzx[i + 1] = dz[i]
+            ratio = -0.5 * z[i] / dz[i]
+            largest_z = min(largest_z, ratio if dz[i] < 0.0 else np.inf)
+        largest = np.inf
+        cross = 0.0  # Σ s Δy + y Δs
+        square = 0.0  # Σ Δs Δy
+        for j in range(m):
+            k = left[j]
+            jdz = gl[j] * dzx[k] + gr[j] * dzx[k + 1]
+            d_s = -rp[j] - jdz
+            if phase == 0:
+                d_y = -y[j] + w[j] * (rp[j] + jdz)
+            else:
+                d_y = dy[j] + w[j] * jdz  # dy holds the corrector's constant part
+            dsl[j] = d_s
+            dy[j] = d_y
+            r_s = -s[j] / d_s  # branch-free: the sign of a step is unpredictable
+            r_y = -y[j] / d_y
+            largest = min(largest, min(r_s if d_s < 0.0 else np.inf, r_y if d_y < 0.0 else np.inf))
+            if phase == 0:
+                cross += s[j] * d_y + y[j] * d_s
+                square += d_s * d_y
+        if phase == 0:
+            step = min(1.0, largest, largest_z)
+            mu_aff = (gap + step * cross + step * step * square) / m
+            sigma_mu = (mu_aff / mu) ** 3 * mu
+            # the corrector: complementarity target s y + Δs Δy − σμ
+            for k in range(rhs.size):
+                rhs[k] = 0.0
+            for j in range(m):
+                comp = s[j] * y[j] + dsl[j] * dy[j] - sigma_mu
+                v = (comp - y[j] * rp[j]) * inv_s[j]
+                rhs[left[j]] += gl[j] * v
+                rhs[left[j] + 1] += gr[j] * v
+                dy[j] = (-comp + y[j] * rp[j]) * inv_s[j]
+        else:
+            step = min(1.0, tau * largest, largest_z)
+    return step
 
 
 @_jit()
@@ -620,8 +671,7 @@ def envelope_rows(
     b_{k+1}, the constant and the limits (±inf on a side implied).
     """
     big_n, points, joints = pcl.shape
-    n_pairs = 16 * (points - 1)  # the sums of every interval
-    per_seg = joints * n_pairs
+    per_seg = joints * 16 * (points - 1)  # the sums of every interval
     size = 4
     for k in range(big_n):
         size = max(size, 4 + 2 * (seg_rows[k + 1] - seg_rows[k]) + 2 * per_seg)
@@ -638,14 +688,10 @@ def envelope_rows(
     o_off = np.empty(cap)
     o_lo = np.empty(cap)
     o_up = np.empty(cap)
-    kcl = np.empty(points)
-    kcr = np.empty(points)
-    koff = np.empty(points)
+    kappa = np.empty((3, points))  # κ's coefficients of b_k, b_k+1 and its constant
     c_pt = np.empty(per_seg, dtype=np.int64)
     c_joint = np.empty(per_seg, dtype=np.int64)
-    c_cl = np.empty(per_seg)
-    c_cr = np.empty(per_seg)
-    c_off = np.empty(per_seg)
+    c_val = np.empty((3, per_seg))  # a sum's coefficients of b_k, b_k+1 and its constant
     c_up = np.empty(per_seg, dtype=np.bool_)
     c_lo = np.empty(per_seg, dtype=np.bool_)
     out = 0
@@ -653,191 +699,36 @@ def envelope_rows(
         count = _polygon(
             k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack, xs, ys, tx, ty
         )
-        bx, by = cap_b[k], cap_b[k + 1]
         found = 0
         for j in range(joints):
             if not (np.isfinite(lo[j]) or np.isfinite(up[j])):
                 continue
-            for p in range(1, points - 1):
-                kcl[p] = pcl[k, p - 1, j] - 2.0 * pcl[k, p, j] + pcl[k, p + 1, j]
-                kcr[p] = pcr[k, p - 1, j] - 2.0 * pcr[k, p, j] + pcr[k, p + 1, j]
-                koff[p] = poff[k, p - 1, j] - 2.0 * poff[k, p, j] + poff[k, p + 1, j]
-            # at the knots extrapolated from the two next points (see between._curvature)
-            last = points - 1
-            if points >= 4:
-                kcl[0], kcr[0] = 2.0 * kcl[1] - kcl[2], 2.0 * kcr[1] - kcr[2]
-                koff[0] = 2.0 * koff[1] - koff[2]
-                kcl[last] = 2.0 * kcl[last - 1] - kcl[last - 2]
-                kcr[last] = 2.0 * kcr[last - 1] - kcr[last - 2]
-                koff[last] = 2.0 * koff[last - 1] - koff[last - 2]
-            else:
-                kcl[0], kcr[0], koff[0] = kcl[1], kcr[1], koff[1]
-                kcl[last], kcr[last], koff[last] = kcl[last - 1], kcr[last - 1], koff[last - 1]
-            if count > 0:  # no sum can bind if the values and curvatures together cannot
-                v_hi, v_lo, k_abs, dk_abs, v_size, k_size = -np.inf, np.inf, 0.0, 0.0, 0.0, 0.0
-                for p in range(points):
-                    hi, low = _extremes(pcl[k, p, j], pcr[k, p, j], poff[k, p, j], xs, ys, count)
-                    v_hi, v_lo = max(v_hi, hi), min(v_lo, low)
-                    hi, low = _extremes(kcl[p], kcr[p], koff[p], xs, ys, count)
-                    k_abs = max(k_abs, abs(hi), abs(low))
-                    if p + 1 < points:
-                        hi, low = _extremes(
-                            kcl[p + 1] - kcl[p],
-                            kcr[p + 1] - kcr[p],
-                            koff[p + 1] - koff[p],
-                            xs,
-                            ys,
-                            count,
-                        )
-                        dk_abs = max(dk_abs, abs(hi), abs(low))
-                    v_size = max(
-                        v_size, abs(pcl[k, p, j]) * bx + abs(pcr[k, p, j]) * by + abs(poff[k, p, j])
-                    )
-                    k_size = max(k_size, abs(kcl[p]) * bx + abs(kcr[p]) * by + abs(koff[p]))
-                size_max = v_size + 0.375 * k_size  # no sum is larger over the box
-                k_abs += dk_abs
-                reach = k_abs / 8.0
-                open_up = np.isfinite(up[j]) and (
-                    v_hi + reach > up[j] - slack * (size_max + abs(up[j]))
-                )
-                open_lo = np.isfinite(lo[j]) and (
-                    v_lo - reach < lo[j] + slack * (size_max + abs(lo[j]))
-                )
-                if not (open_up or open_lo):
-                    continue
-            for p in range(points - 1):
-                # where a curvature term keeps its sign on the whole polygon, the sums with the
-                # other sign lie inside those with this one there: an upper side needs only
-                # +|κ|, a lower side only −|κ| (0: either sign, both needed)
-                sign_k0 = sign_k1 = sign_dk = 0.0
-                if count > 0:
-                    sign_k0 = _sign_on(kcl[p], kcr[p], koff[p], xs, ys, count)
-                    sign_k1 = _sign_on(kcl[p + 1], kcr[p + 1], koff[p + 1], xs, ys, count)
-                    sign_dk = _sign_on(
-                        kcl[p + 1] - kcl[p],
-                        kcr[p + 1] - kcr[p],
-                        koff[p + 1] - koff[p],
-                        xs,
-                        ys,
-                        count,
-                    )
-                for q in range(16):
-                    i = p + (q >> 3)
-                    at = p + ((q >> 2) & 1)
-                    s = 1.0 if (q >> 1) & 1 else -1.0
-                    t = 1.0 if q & 1 else -1.0
-                    sign_k = sign_k0 if at == p else sign_k1
-                    need_up = np.isfinite(up[j]) and s * sign_k >= 0.0 and t * sign_dk >= 0.0
-                    need_lo = np.isfinite(lo[j]) and s * sign_k <= 0.0 and t * sign_dk <= 0.0
-                    if not (need_up or need_lo):
-                        continue
-                    cl = pcl[k, i, j] + (s * kcl[at] + t * (kcl[p + 1] - kcl[p])) / 8.0
-                    cr = pcr[k, i, j] + (s * kcr[at] + t * (kcr[p + 1] - kcr[p])) / 8.0
-                    off = poff[k, i, j] + (s * koff[at] + t * (koff[p + 1] - koff[p])) / 8.0
-                    if count > 0:
-                        hi, low = _extremes(cl, cr, off, xs, ys, count)
-                        size_q = abs(cl) * bx + abs(cr) * by + abs(off)
-                        if need_up and hi <= up[j] - slack * (size_q + abs(up[j])):
-                            need_up = False
-                        if need_lo and low >= lo[j] + slack * (size_q + abs(lo[j])):
-                            need_lo = False
-                    if not (need_up or need_lo):
-                        continue
-                    c_pt[found], c_joint[found] = i, j
-                    c_cl[found], c_cr[found], c_off[found] = cl, cr, off
-                    c_up[found], c_lo[found] = need_up, need_lo
-                    found += 1
-        if count > 0:  # cut the polygon by the sides left, then keep those that touch it
-            for c in range(found):
-                j = c_joint[c]
-                size_q = abs(c_cl[c]) * bx + abs(c_cr[c]) * by + abs(c_off[c])
-                for sign in (1.0, -1.0):
-                    if (sign > 0.0 and not c_up[c]) or (sign < 0.0 and not c_lo[c]):
-                        continue
-                    bound = up[j] if sign > 0.0 else lo[j]
-                    loose = slack * (size_q + abs(bound))
-                    count = _cut(
-                        xs,
-                        ys,
-                        count,
-                        sign * c_cl[c],
-                        sign * c_cr[c],
-                        sign * (c_off[c] - bound) - loose,
-                        tx,
-                        ty,
-                    )
-                    if count <= 0:
-                        break
-                if count <= 0:
-                    break
-            if count > 0:
-                for c in range(found):
-                    j = c_joint[c]
-                    hi, low = _extremes(c_cl[c], c_cr[c], c_off[c], xs, ys, count)
-                    size_q = abs(c_cl[c]) * bx + abs(c_cr[c]) * by + abs(c_off[c])
-                    if c_up[c] and hi <= up[j] - touch * abs(up[j]) - 1e-12 * size_q:
-                        c_up[c] = False
-                    if c_lo[c] and low >= lo[j] + touch * abs(lo[j]) + 1e-12 * size_q:
-                        c_lo[c] = False
+            _curvatures(pcl[k, :, j], pcr[k, :, j], poff[k, :, j], kappa)
+            if count > 0 and not _may_bind(
+                pcl[k, :, j], pcr[k, :, j], poff[k, :, j], kappa, cap_b[k], cap_b[k + 1],
+                lo[j], up[j], slack, xs, ys, count,
+            ):  # fmt: skip
+                continue  # no sum can bind if the values and curvatures together cannot
+            found = _sums(
+                k, j, pcl, pcr, poff, kappa, lo[j], up[j], slack, cap_b, xs, ys, count,
+                c_pt, c_joint, c_val, c_up, c_lo, found,
+            )  # fmt: skip
+        if count > 0:
+            count = _touching(
+                cap_b[k], cap_b[k + 1], lo, up, slack, touch, xs, ys, tx, ty, count,
+                c_joint, c_val, c_up, c_lo, found,
+            )  # fmt: skip
         if out + 2 * found > cap:
             cap = 2 * (out + 2 * found)
             o_seg, o_pt = _grow_int(o_seg, cap), _grow_int(o_pt, cap)
             o_joint = _grow_int(o_joint, cap)
             o_cl, o_cr, o_off = _grow(o_cl, cap), _grow(o_cr, cap), _grow(o_off, cap)
             o_lo, o_up = _grow(o_lo, cap), _grow(o_up, cap)
-        # one-sided rows. A side within ``merge`` of its limit of one already kept (of the same
-        # joint and point) on the polygon cut by all of them takes the place of the two: the one
-        # larger there (upper side; smaller, lower side). Outside that polygon the one left out may
-        # exceed the other by a little more; the check after the solve takes that back. Without
-        # a polygon (an unbounded box) the two merge into one that implies both for b ≥ 0:
-        # coefficients and constant the larger (upper) or the smaller (lower) of both.
-        first = out
-        for c in range(found):
-            j = c_joint[c]
-            size_q = abs(c_cl[c]) * bx + abs(c_cr[c]) * by + abs(c_off[c])
-            for sign in (1.0, -1.0):
-                if (sign > 0.0 and not c_up[c]) or (sign < 0.0 and not c_lo[c]):
-                    continue
-                bound = up[j] if sign > 0.0 else lo[j]
-                tol = merge * abs(bound) + 1e-12 * size_q
-                into = -1
-                for r in range(first, out):
-                    if o_joint[r] != j or o_pt[r] != c_pt[c] or (o_up[r] < np.inf) != (sign > 0.0):
-                        continue
-                    if count > 0:
-                        hi, low = _extremes(
-                            o_cl[r] - c_cl[c], o_cr[r] - c_cr[c], o_off[r] - c_off[c], xs, ys, count
-                        )
-                        gap = max(abs(hi), abs(low))
-                    else:
-                        gap = (
-                            abs(o_cl[r] - c_cl[c]) * bx
-                            + abs(o_cr[r] - c_cr[c]) * by
-                            + abs(o_off[r] - c_off[c])
-                        )
-                    if gap <= tol:
-                        into = r
-                        break
-                if into >= 0:
-                    if count > 0:
-                        hi_r, low_r = _extremes(o_cl[into], o_cr[into], o_off[into], xs, ys, count)
-                        hi_c, low_c = _extremes(c_cl[c], c_cr[c], c_off[c], xs, ys, count)
-                        if (hi_c > hi_r) if sign > 0.0 else (low_c < low_r):
-                            o_cl[into], o_cr[into], o_off[into] = c_cl[c], c_cr[c], c_off[c]
-                    elif sign > 0.0:
-                        o_cl[into] = max(o_cl[into], c_cl[c])
-                        o_cr[into] = max(o_cr[into], c_cr[c])
-                        o_off[into] = max(o_off[into], c_off[c])
-                    else:
-                        o_cl[into] = min(o_cl[into], c_cl[c])
-                        o_cr[into] = min(o_cr[into], c_cr[c])
-                        o_off[into] = min(o_off[into], c_off[c])
-                    continue
-                o_seg[out], o_pt[out], o_joint[out] = k, c_pt[c], j
-                o_cl[out], o_cr[out], o_off[out] = c_cl[c], c_cr[c], c_off[c]
-                o_lo[out] = bound if sign < 0.0 else -np.inf
-                o_up[out] = bound if sign > 0.0 else np.inf
-                out += 1
+        out = _one_sided(
+            k, cap_b[k], cap_b[k + 1], lo, up, merge, xs, ys, count,
+            c_pt, c_joint, c_val, c_up, c_lo, found,
+            o_seg, o_pt, o_joint, o_cl, o_cr, o_off, o_lo, o_up, out,
+        )  # fmt: skip
     return (
         o_seg[:out],
         o_pt[:out],
@@ -848,6 +739,215 @@ def envelope_rows(
         o_lo[:out],
         o_up[:out],
     )
+
+
+@_jit()
+def _curvatures(vcl, vcr, voff, kappa):  # pragma: no cover - compiled
+    """κ_p, the second differences of a quantity at a segment's points (its coefficients of
+    b_k and b_k+1 and its constant, from those of the values), at the knots extrapolated from
+    the two next points (see between._curvature)."""
+    points = vcl.size
+    for p in range(1, points - 1):
+        kappa[0, p] = vcl[p - 1] - 2.0 * vcl[p] + vcl[p + 1]
+        kappa[1, p] = vcr[p - 1] - 2.0 * vcr[p] + vcr[p + 1]
+        kappa[2, p] = voff[p - 1] - 2.0 * voff[p] + voff[p + 1]
+    last = points - 1
+    for c in range(3):
+        if points >= 4:
+            kappa[c, 0] = 2.0 * kappa[c, 1] - kappa[c, 2]
+            kappa[c, last] = 2.0 * kappa[c, last - 1] - kappa[c, last - 2]
+        else:
+            kappa[c, 0] = kappa[c, 1]
+            kappa[c, last] = kappa[c, last - 1]
+
+
+@_jit()
+def _may_bind(
+    vcl, vcr, voff, kappa, bx, by, lo, up, slack, xs, ys, count
+):  # pragma: no cover - compiled
+    """Whether any sum of a joint's quantity on the segment's polygon can come within ``slack``
+    of a limit: its largest value plus the largest curvature terms over the polygon."""
+    points = vcl.size
+    v_hi, v_lo, k_abs, dk_abs, v_size, k_size = -np.inf, np.inf, 0.0, 0.0, 0.0, 0.0
+    for p in range(points):
+        hi, low = _extremes(vcl[p], vcr[p], voff[p], xs, ys, count)
+        v_hi, v_lo = max(v_hi, hi), min(v_lo, low)
+        hi, low = _extremes(kappa[0, p], kappa[1, p], kappa[2, p], xs, ys, count)
+        k_abs = max(k_abs, abs(hi), abs(low))
+        if p + 1 < points:
+            hi, low = _extremes(
+                kappa[0, p + 1] - kappa[0, p],
+                kappa[1, p + 1] - kappa[1, p],
+                kappa[2, p + 1] - kappa[2, p],
+                xs,
+                ys,
+                count,
+            )
+            dk_abs = max(dk_abs, abs(hi), abs(low))
+        v_size = max(v_size, abs(vcl[p]) * bx + abs(vcr[p]) * by + abs(voff[p]))
+        k_size = max(k_size, abs(kappa[0, p]) * bx + abs(kappa[1, p]) * by + abs(kappa[2, p]))
+    size_max = v_size + 0.375 * k_size  # no sum is larger over the box
+    reach = (k_abs + dk_abs) / 8.0
+    open_up = np.isfinite(up) and (v_hi + reach > up - slack * (size_max + abs(up)))
+    open_lo = np.isfinite(lo) and (v_lo - reach < lo + slack * (size_max + abs(lo)))
+    return open_up or open_lo
+
+
+@_jit()
+def _sums(
+    k, j, pcl, pcr, poff, kappa, lo, up, slack, cap_b, xs, ys, count,
+    c_pt, c_joint, c_val, c_up, c_lo, found,
+):  # fmt: skip  # pragma: no cover - compiled
+    """The 16 sums q_i ± κ_l / 8 ± (κ_p+1 − κ_p) / 8 of every interval of joint j on segment
+    k whose sides are not implied on the polygon, appended as candidates after ``found``;
+    returns their new count."""
+    points = pcl.shape[1]
+    bx, by = cap_b[k], cap_b[k + 1]
+    for p in range(points - 1):
+        # where a curvature term keeps its sign on the whole polygon, the sums with the
+        # other sign lie inside those with this one there: an upper side needs only
+        # +|κ|, a lower side only −|κ| (0: either sign, both needed)
+        sign_k0 = sign_k1 = sign_dk = 0.0
+        if count > 0:
+            sign_k0 = _sign_on(kappa[0, p], kappa[1, p], kappa[2, p], xs, ys, count)
+            sign_k1 = _sign_on(kappa[0, p + 1], kappa[1, p + 1], kappa[2, p + 1], xs, ys, count)
+            sign_dk = _sign_on(
+                kappa[0, p + 1] - kappa[0, p],
+                kappa[1, p + 1] - kappa[1, p],
+                kappa[2, p + 1] - kappa[2, p],
+                xs,
+                ys,
+                count,
+            )
+        for q in range(16):
+            i = p + (q >> 3)
+            at = p + ((q >> 2) & 1)
+            s = 1.0 if (q >> 1) & 1 else -1.0
+            t = 1.0 if q & 1 else -1.0
+            sign_k = sign_k0 if at == p else sign_k1
+            need_up = np.isfinite(up) and s * sign_k >= 0.0 and t * sign_dk >= 0.0
+            need_lo = np.isfinite(lo) and s * sign_k <= 0.0 and t * sign_dk <= 0.0
+            if not (need_up or need_lo):
+                continue
+            cl = pcl[k, i, j] + (s * kappa[0, at] + t * (kappa[0, p + 1] - kappa[0, p])) / 8.0
+            cr = pcr[k, i, j] + (s * kappa[1, at] + t * (kappa[1, p + 1] - kappa[1, p])) / 8.0
+            off = poff[k, i, j] + (s * kappa[2, at] + t * (kappa[2, p + 1] - kappa[2, p])) / 8.0
+            if count > 0:
+                hi, low = _extremes(cl, cr, off, xs, ys, count)
+                size_q = abs(cl) * bx + abs(cr) * by + abs(off)
+                if need_up and hi <= up - slack * (size_q + abs(up)):
+                    need_up = False
+                if need_lo and low >= lo + slack * (size_q + abs(lo)):
+                    need_lo = False
+            if not (need_up or need_lo):
+                continue
+            c_pt[found], c_joint[found] = i, j
+            c_val[0, found], c_val[1, found], c_val[2, found] = cl, cr, off
+            c_up[found], c_lo[found] = need_up, need_lo
+            found += 1
+    return found
+
+
+@_jit()
+def _touching(
+    bx, by, lo, up, slack, touch, xs, ys, tx, ty, count,
+    c_joint, c_val, c_up, c_lo, found,
+):  # fmt: skip  # pragma: no cover - compiled
+    """The polygon cut by the candidates' sides; the sides that do not touch what remains
+    (within ``touch`` of their limit) are dropped. Returns the cut polygon's vertex count."""
+    for c in range(found):
+        j = c_joint[c]
+        size_q = abs(c_val[0, c]) * bx + abs(c_val[1, c]) * by + abs(c_val[2, c])
+        for sign in (1.0, -1.0):
+            if (sign > 0.0 and not c_up[c]) or (sign < 0.0 and not c_lo[c]):
+                continue
+            bound = up[j] if sign > 0.0 else lo[j]
+            loose = slack * (size_q + abs(bound))
+            count = _cut(
+                xs,
+                ys,
+                count,
+                sign * c_val[0, c],
+                sign * c_val[1, c],
+                sign * (c_val[2, c] - bound) - loose,
+                tx,
+                ty,
+            )
+            if count <= 0:
+                break
+        if count <= 0:
+            break
+    if count > 0:
+        for c in range(found):
+            j = c_joint[c]
+            hi, low = _extremes(c_val[0, c], c_val[1, c], c_val[2, c], xs, ys, count)
+            size_q = abs(c_val[0, c]) * bx + abs(c_val[1, c]) * by + abs(c_val[2, c])
+            if c_up[c] and hi <= up[j] - touch * abs(up[j]) - 1e-12 * size_q:
+                c_up[c] = False
+            if c_lo[c] and low >= lo[j] + touch * abs(lo[j]) + 1e-12 * size_q:
+                c_lo[c] = False
+    return count
+
+
+@_jit()
+def _one_sided(
+    k, bx, by, lo, up, merge, xs, ys, count,
+    c_pt, c_joint, c_val, c_up, c_lo, found,
+    o_seg, o_pt, o_joint, o_cl, o_cr, o_off, o_lo, o_up, out,
+):  # fmt: skip  # pragma: no cover - compiled
+    """The candidates' sides left as one-sided rows of segment k, appended after ``out``;
+    returns the new count.
+
+    A side within ``merge`` of its limit of one already kept (of the same joint and point) on
+    the polygon cut by all of them takes the place of the two: the one larger there (upper
+    side; smaller, lower side). Outside that polygon the one left out may exceed the other by a
+    little more; the check after the solve takes that back. Without a polygon (an unbounded
+    box) the two merge into one that implies both for b ≥ 0: coefficients and constant the
+    larger (upper) or the smaller (lower) of both.
+    """
+    first = out
+    for c in range(found):
+        j = c_joint[c]
+        cl, cr, off = c_val[0, c], c_val[1, c], c_val[2, c]
+        size_q = abs(cl) * bx + abs(cr) * by + abs(off)
+        for sign in (1.0, -1.0):
+            if (sign > 0.0 and not c_up[c]) or (sign < 0.0 and not c_lo[c]):
+                continue
+            bound = up[j] if sign > 0.0 else lo[j]
+            tol = merge * abs(bound) + 1e-12 * size_q
+            into = -1
+            for r in range(first, out):
+                if o_joint[r] != j or o_pt[r] != c_pt[c] or (o_up[r] < np.inf) != (sign > 0.0):
+                    continue
+                if count > 0:
+                    hi, low = _extremes(o_cl[r] - cl, o_cr[r] - cr, o_off[r] - off, xs, ys, count)
+                    gap = max(abs(hi), abs(low))
+                else:
+                    gap = abs(o_cl[r] - cl) * bx + abs(o_cr[r] - cr) * by + abs(o_off[r] - off)
+                if gap <= tol:
+                    into = r
+                    break
+            if into >= 0:
+                if count > 0:
+                    hi_r, low_r = _extremes(o_cl[into], o_cr[into], o_off[into], xs, ys, count)
+                    hi_c, low_c = _extremes(cl, cr, off, xs, ys, count)
+                    if (hi_c > hi_r) if sign > 0.0 else (low_c < low_r):
+                        o_cl[into], o_cr[into], o_off[into] = cl, cr, off
+                elif sign > 0.0:
+                    o_cl[into] = max(o_cl[into], cl)
+                    o_cr[into] = max(o_cr[into], cr)
+                    o_off[into] = max(o_off[into], off)
+                else:
+                    o_cl[into] = min(o_cl[into], cl)
+                    o_cr[into] = min(o_cr[into], cr)
+                    o_off[into] = min(o_off[into], off)
+                continue
+            o_seg[out], o_pt[out], o_joint[out] = k, c_pt[c], j
+            o_cl[out], o_cr[out], o_off[out] = cl, cr, off
+            o_lo[out] = bound if sign < 0.0 else -np.inf
+            o_up[out] = bound if sign > 0.0 else np.inf
+            out += 1
+    return out
 
 
 @_jit()
