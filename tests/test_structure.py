@@ -2,8 +2,9 @@
 
 Every import of a ``nearopt`` module by another (at the top or inside a function) is an arrow;
 the test holds: no cycle, no private name (``_x``) imported from another module, argparse only
-in the command line, and nothing but the command line (and ``python -m``) importing it. Run as a
-script, it prints the graph's size and the functions over 100 lines (docstrings left out).
+in the command line, nothing but the command line (and ``python -m``) importing it, and no function
+longer than 100 lines (docstrings left out). Run as a script, it prints the graph's size and the
+functions over 100 lines.
 
     python tests/test_structure.py
 """
@@ -131,6 +132,11 @@ def test_no_private_name_crosses_a_module() -> None:
     assert read_structure().private == []
 
 
+def test_no_function_is_longer_than_100_lines() -> None:
+    """Docstrings left out; the reader's self-test below shows a long function is seen."""
+    assert read_structure().long_functions == []
+
+
 def test_only_the_command_line_knows_argparse() -> None:
     structure = read_structure()
     assert structure.argparse == {"nearopt.cli"}
@@ -155,10 +161,13 @@ def test_the_reader_sees_a_cycle_and_a_private_import(tmp_path: Path) -> None:
     (package / "__init__.py").write_text("")
     (package / "a.py").write_text("from .sub.b import _hidden\n")
     (package / "sub" / "__init__.py").write_text("")
-    (package / "sub" / "b.py").write_text("def f():\n    from ..a import x\n")
+    (package / "sub" / "b.py").write_text(
+        "def f():\n    from ..a import x\n\n\ndef g():\n" + "    x = 1\n" * 100
+    )
     structure = read_structure(package)
     assert structure.cycles() == [["nearopt.a", "nearopt.sub.b"]]
     assert structure.private == [("nearopt.a", "nearopt.sub.b", "_hidden")]
+    assert structure.long_functions == [("nearopt.sub.b", "g", 101)]
 
 
 if __name__ == "__main__":
