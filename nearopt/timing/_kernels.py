@@ -703,9 +703,9 @@ def envelope_rows(
         for j in range(joints):
             if not (np.isfinite(lo[j]) or np.isfinite(up[j])):
                 continue
-            _curvatures(pcl[k, :, j], pcr[k, :, j], poff[k, :, j], kappa)
+            _curvatures(pcl, pcr, poff, k, j, kappa)
             if count > 0 and not _may_bind(
-                pcl[k, :, j], pcr[k, :, j], poff[k, :, j], kappa, cap_b[k], cap_b[k + 1],
+                pcl, pcr, poff, k, j, kappa, cap_b[k], cap_b[k + 1],
                 lo[j], up[j], slack, xs, ys, count,
             ):  # fmt: skip
                 continue  # no sum can bind if the values and curvatures together cannot
@@ -742,15 +742,15 @@ def envelope_rows(
 
 
 @_jit()
-def _curvatures(vcl, vcr, voff, kappa):  # pragma: no cover - compiled
-    """κ_p, the second differences of a quantity at a segment's points (its coefficients of
-    b_k and b_k+1 and its constant, from those of the values), at the knots extrapolated from
-    the two next points (see between._curvature)."""
-    points = vcl.size
+def _curvatures(pcl, pcr, poff, k, j, kappa):  # pragma: no cover - compiled
+    """κ_p, the second differences of joint j's quantity at segment k's points (its
+    coefficients of b_k and b_k+1 and its constant, from those of the values), at the knots
+    extrapolated from the two next points (see between._curvature)."""
+    points = pcl.shape[1]
     for p in range(1, points - 1):
-        kappa[0, p] = vcl[p - 1] - 2.0 * vcl[p] + vcl[p + 1]
-        kappa[1, p] = vcr[p - 1] - 2.0 * vcr[p] + vcr[p + 1]
-        kappa[2, p] = voff[p - 1] - 2.0 * voff[p] + voff[p + 1]
+        kappa[0, p] = pcl[k, p - 1, j] - 2.0 * pcl[k, p, j] + pcl[k, p + 1, j]
+        kappa[1, p] = pcr[k, p - 1, j] - 2.0 * pcr[k, p, j] + pcr[k, p + 1, j]
+        kappa[2, p] = poff[k, p - 1, j] - 2.0 * poff[k, p, j] + poff[k, p + 1, j]
     last = points - 1
     for c in range(3):
         if points >= 4:
@@ -763,14 +763,14 @@ def _curvatures(vcl, vcr, voff, kappa):  # pragma: no cover - compiled
 
 @_jit()
 def _may_bind(
-    vcl, vcr, voff, kappa, bx, by, lo, up, slack, xs, ys, count
+    pcl, pcr, poff, k, j, kappa, bx, by, lo, up, slack, xs, ys, count
 ):  # pragma: no cover - compiled
-    """Whether any sum of a joint's quantity on the segment's polygon can come within ``slack``
+    """Whether any sum of joint j's quantity on segment k's polygon can come within ``slack``
     of a limit: its largest value plus the largest curvature terms over the polygon."""
-    points = vcl.size
+    points = pcl.shape[1]
     v_hi, v_lo, k_abs, dk_abs, v_size, k_size = -np.inf, np.inf, 0.0, 0.0, 0.0, 0.0
     for p in range(points):
-        hi, low = _extremes(vcl[p], vcr[p], voff[p], xs, ys, count)
+        hi, low = _extremes(pcl[k, p, j], pcr[k, p, j], poff[k, p, j], xs, ys, count)
         v_hi, v_lo = max(v_hi, hi), min(v_lo, low)
         hi, low = _extremes(kappa[0, p], kappa[1, p], kappa[2, p], xs, ys, count)
         k_abs = max(k_abs, abs(hi), abs(low))
@@ -784,7 +784,7 @@ def _may_bind(
                 count,
             )
             dk_abs = max(dk_abs, abs(hi), abs(low))
-        v_size = max(v_size, abs(vcl[p]) * bx + abs(vcr[p]) * by + abs(voff[p]))
+        v_size = max(v_size, abs(pcl[k, p, j]) * bx + abs(pcr[k, p, j]) * by + abs(poff[k, p, j]))
         k_size = max(k_size, abs(kappa[0, p]) * bx + abs(kappa[1, p]) * by + abs(kappa[2, p]))
     size_max = v_size + 0.375 * k_size  # no sum is larger over the box
     reach = (k_abs + dk_abs) / 8.0
