@@ -199,6 +199,7 @@ def test_a_local_batch_plans_every_motion_and_records_the_failure(
         )
 
 
+@pytest.mark.slow
 def test_a_dask_cluster_gives_the_same_summary(cluster: dict, local_run: tuple[Path, Path]) -> None:
     tasks, local_out = local_run
     out = tasks.parent / "dask-out"
@@ -209,6 +210,7 @@ def test_a_dask_cluster_gives_the_same_summary(cluster: dict, local_run: tuple[P
     assert same["q"] == json.loads((local_out / "ur5-3.json").read_text())["q"]
 
 
+@pytest.mark.slow
 def test_a_worker_killed_mid_batch_loses_no_motion(cluster: dict, tmp_path: Path) -> None:
     """SIGKILL to a Dask worker process while it plans: the scheduler runs its task elsewhere;
     every motion is written once."""
@@ -253,6 +255,7 @@ def test_a_dead_local_worker_is_replaced_and_its_motions_rerun(tmp_path: Path) -
     )
 
 
+@pytest.mark.slow
 def test_an_interrupted_batch_resumes_without_replanning(tmp_path: Path) -> None:
     records = [dict(r, max_iterations=20) for r in motions(6, seed=11)]  # slower: time to stop
     tasks = write_motions(tmp_path, records)

@@ -215,6 +215,7 @@ def test_the_certificate_holds_on_dense_samples(rng: np.random.Generator) -> Non
 
 
 # ---------------------------------------------------------------- plans in a cell
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ur5", "panda"])
 def test_plans_in_a_cell_keep_the_margin_and_the_limits(name: str) -> None:
     robot = load(name)
@@ -236,6 +237,7 @@ def test_plans_in_a_cell_keep_the_margin_and_the_limits(name: str) -> None:
     assert result.J >= free.J * (1 - 1e-3)  # the cell costs something, never less
 
 
+@pytest.mark.slow
 def test_self_collision_is_avoided_where_the_free_optimum_collides() -> None:
     robot = load("ur5")
     lo, hi = robot.limits.position_lower, robot.limits.position_upper

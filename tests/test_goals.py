@@ -41,6 +41,7 @@ def test_inverse_kinematics_reaches_poses_within_the_limits(
         assert np.all(q >= lim.position_lower) and np.all(q <= lim.position_upper)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["ur5", "panda"])
 def test_a_plan_to_a_tool_pose_ends_there(
     name: str, rng: np.random.Generator, tmp_path: Path
@@ -154,6 +155,7 @@ def test_bad_goal_and_via_options_get_one_line(args: list[str]) -> None:
     assert run.returncode == 2 and len(run.stderr.strip().splitlines()) == 1, run.stderr
 
 
+@pytest.mark.slow
 def test_the_goal_configuration_is_optimised_along_the_pose(rng: np.random.Generator) -> None:
     """panda is redundant: θe moves among the configurations that hold the pose. J never ends
     above the plan with inverse kinematics' θe, and every iterate ends exactly at the pose."""
@@ -193,6 +195,7 @@ def test_the_workspace_figure_marks_the_target() -> None:
     np.testing.assert_allclose(np.ravel(star._offsets3d), goal.position, atol=1e-12)
 
 
+@pytest.mark.slow
 def test_via_points_are_passed_exactly_without_stopping(tmp_path: Path) -> None:
     """ur5 through a joint via-point (CLI) and panda through a tool pose: every iterate's path
     goes through, the written motion is there at the reported time, moving."""

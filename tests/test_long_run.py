@@ -7,6 +7,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+import pytest
 from conftest import load, random_configuration
 
 import nearopt
@@ -21,6 +22,7 @@ def resident_mib() -> float:
     return pages * 4096 / 2**20
 
 
+@pytest.mark.slow
 def test_two_hundred_plans_neither_leak_nor_hang() -> None:
     robots = [load("two_link"), load("ur5")]
     rng = np.random.default_rng(200)

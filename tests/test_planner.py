@@ -232,6 +232,7 @@ def test_plan_rejects_bad_requests() -> None:
         nearopt.plan(narrow, [0.0, 0.0], [0.5, -1.5])
 
 
+@pytest.mark.slow
 def test_many_control_points_do_not_stall_on_a_coarse_iterate_grid() -> None:
     """48 control points with the default 64-segment iterate grid: the iterates are timed on at
     least 4 segments per control point, so the plan improves the line as 16 points do (it

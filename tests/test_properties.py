@@ -14,6 +14,7 @@ COSTS = [nearopt.TimeCost(), nearopt.TorqueCost(0.03)]
 BUDGET = {"grid": 40, "options": nearopt.SCPOptions(control_points=6, grid=40), "max_iterations": 5}
 
 
+@pytest.mark.slow
 def test_random_plans_verify_or_raise_a_documented_error(robot: nearopt.Robot) -> None:
     """Five seeded requests per arm: each plan verifies, or the request is refused because gravity
     alone exceeds a torque limit on the straight line (checked here by RNEA at the place the error

@@ -218,6 +218,7 @@ def test_the_cli_plans_a_task_file_and_marks_the_segments(tmp_path: Path) -> Non
     assert run.returncode == 2 and "start configuration" in run.stderr
 
 
+@pytest.mark.slow
 def test_the_pick_and_place_example_runs_and_its_files_hold_the_task(tmp_path: Path) -> None:
     """scripts/02_pick_and_place.py (as CI runs it): the JSON's samples reach every pose
     (independent forward kinematics), at rest where the task stops, moving where it passes."""

@@ -301,6 +301,7 @@ def test_one_solve_holds_the_limits_between_samples(name: str, monkeypatch) -> N
     assert solves.count(1) >= (0.5 * timed if damped else timed), solves
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["two_link", "ur5", "panda"])
 def test_limits_hold_between_samples_on_random_paths(name: str) -> None:
     """36 seeded paths per arm (lines, splines, B-splines; grids of 40 to 200 segments; time and
