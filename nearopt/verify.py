@@ -9,12 +9,12 @@ but the motion itself.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 import pinocchio as pin
-from scipy.integrate import solve_ivp
 
 from .errors import VerificationError
 from .validate import check_rate
@@ -26,7 +26,7 @@ if TYPE_CHECKING:
     from .cost import Cost
     from .robot import Robot
     from .robot.kinematics import ToolPose
-    from .trajectory import Motion, Trajectory
+    from .trajectory import Motion
 
 __all__ = [
     "Check",
@@ -48,6 +48,18 @@ class Waypoint:
     q: ArrayLike | None = None
     pose: ToolPose | None = None
     stop: bool = False
+
+
+CHUNK = 65536
+"""Samples (and quadrature nodes) checked at a time: a check's memory does not grow with the
+motion's duration."""
+MAX_STEP = 2e-3
+"""The forward simulation's longest Runge-Kutta step [s]."""
+MAX_HALVINGS = 6
+"""How often the forward simulation of a window halves its step at most."""
+MAX_WINDOWS = 400
+"""The forward simulation's windows at most (100 s of motion at the default window): a longer
+motion is simulated on that many windows spread evenly over it, the last one among them."""
 
 
 @dataclass(frozen=True)
@@ -222,23 +234,26 @@ def verify(
         simulation_tolerance,
         window,
     )
-    motion = _Sampled.of(trajectory, robot, rate)
-    start = motion.q[0] if q0 is None else robot.check_configuration(q0, "q0")
-    goal = motion.q[-1] if qe is None else robot.check_configuration(qe, "qe")
-    checks = _limit_checks(robot, motion, tol, velocity_limits, position_limits)
-    checks.append(_end_check(robot, motion, start, goal, tol))
+    pool = pin.ModelPool(robot.model, 1)
+    ends = _Sampled.at(trajectory, robot, pool, np.array([0.0, trajectory.duration]))
+    start = ends.q[0] if q0 is None else robot.check_configuration(q0, "q0")
+    goal = ends.q[-1] if qe is None else robot.check_configuration(qe, "qe")
+    limits, clearance, count = _sample_checks(
+        robot, trajectory, pool, rate, tol, velocity_limits, position_limits, collisions
+    )
+    checks = [*limits, _end_check(robot, ends, start, goal, tol)]
     if goal_pose is not None:
-        checks.append(_goal_pose_check(robot, motion, goal_pose, tol))
+        checks.append(_goal_pose_check(robot, ends, goal_pose, tol))
     if waypoints:
         _check_waypoints(checks, trajectory, robot, waypoints, end_tolerance)
-    checks.append(_rest_check(robot, motion, tol))
-    if collisions is not None and collisions.pairs:
-        checks.append(_clearance_check(collisions, motion))
+    checks.append(_rest_check(robot, ends, tol))
+    if clearance is not None:
+        checks.append(clearance)
     if cost is not None and J is not None:
-        checks.append(_cost_check(robot, trajectory, cost, J, rate, tol))
+        checks.append(_cost_check(robot, trajectory, pool, cost, J, rate, tol))
     if simulate:
         checks += _simulation_checks(robot, trajectory, goal, tol)
-    return VerificationReport(tuple(checks), float(rate), int(motion.t.size))
+    return VerificationReport(tuple(checks), float(rate), count)
 
 
 class Planned(Protocol):
@@ -328,7 +343,7 @@ class Tolerances:
 
 @dataclass(frozen=True)
 class _Sampled:
-    """The motion sampled once at the controller's rate, with its torques by RNEA (+ D θ̇)."""
+    """The motion at some times, with its torques by RNEA (+ D θ̇)."""
 
     t: NDArray[np.float64]
     q: NDArray[np.float64]
@@ -337,18 +352,70 @@ class _Sampled:
     u: NDArray[np.float64]
 
     @classmethod
-    def of(cls, trajectory: Motion, robot: Robot, rate: float) -> _Sampled:
-        samples = trajectory.sample(rate)
-        q, qd, qdd = samples.q, samples.qd, samples.qdd
-        return cls(samples.t, q, qd, qdd, _torques(robot, q, qd, qdd))
+    def at(
+        cls, trajectory: Motion, robot: Robot, pool: pin.ModelPool, t: NDArray[np.float64]
+    ) -> _Sampled:
+        q, qd, qdd = trajectory.states(t)
+        return cls(t, q, qd, qdd, _torques(robot, pool, q, qd, qdd))
 
 
-def _torques(robot: Robot, q: NDArray, qd: NDArray, qdd: NDArray) -> NDArray[np.float64]:
-    """u = RNEA(θ, θ̇, θ̈) + D θ̇ at every sample, from Pinocchio directly."""
-    model, data = robot.model, robot.new_data()
-    return np.array(
-        [pin.rnea(model, data, *x) + robot.damping * x[1] for x in zip(q, qd, qdd, strict=True)]
-    )
+def _torques(
+    robot: Robot, pool: pin.ModelPool, q: NDArray, qd: NDArray, qdd: NDArray
+) -> NDArray[np.float64]:
+    """u = RNEA(θ, θ̇, θ̈) + D θ̇ at every sample, from Pinocchio directly (its C++ loop over
+    the samples, ``rneaInParallel`` on one thread: the same numbers as ``rnea`` one by one)."""
+    tau = np.zeros((robot.n, q.shape[0]), order="F")
+    if q.shape[0]:
+        pin.rneaInParallel(
+            1, pool, np.asfortranarray(q.T), np.asfortranarray(qd.T), np.asfortranarray(qdd.T), tau
+        )
+    return tau.T + robot.damping * qd
+
+
+def _sample_times(duration: float, rate: float) -> Iterator[NDArray[np.float64]]:
+    """The times of the samples at ``rate`` from 0 to t_e inclusive (the last step shorter, as
+    :meth:`~nearopt.Motion.sample`), :data:`CHUNK` at a time."""
+    count = int(np.floor(duration * rate + 1e-9)) + 1
+    for first in range(0, count, CHUNK):
+        t = np.arange(first, min(first + CHUNK, count)) / rate
+        if first + CHUNK >= count and t[-1] < duration:
+            t = np.append(t, duration)
+        yield t
+
+
+def _sample_checks(
+    robot: Robot,
+    trajectory: Motion,
+    pool: pin.ModelPool,
+    rate: float,
+    tol: Tolerances,
+    velocity_limits: bool,
+    position_limits: bool,
+    collisions: CollisionModel | None,
+) -> tuple[list[Check], Check | None, int]:
+    """The limit checks and the clearance over every sample, :data:`CHUNK` samples at a time
+    (the worst of each check over the chunks); also the number of samples."""
+    limits: list[Check] = []
+    clearance: Check | None = None
+    count = 0
+    for t in _sample_times(trajectory.duration, rate):
+        motion = _Sampled.at(trajectory, robot, pool, t)
+        count += t.size
+        chunk = _limit_checks(robot, motion, tol, velocity_limits, position_limits)
+        limits = (
+            [max(a, b, key=_badness) for a, b in zip(limits, chunk, strict=True)]
+            if limits
+            else chunk
+        )
+        if collisions is not None and collisions.pairs:
+            closest = _clearance_check(collisions, motion)
+            clearance = closest if clearance is None else max(clearance, closest, key=_badness)
+    return limits, clearance, count
+
+
+def _badness(check: Check) -> float:
+    """Which of two checks of the same quantity is the worse (the first of equals)."""
+    return check.worst
 
 
 def _limit_checks(
@@ -470,21 +537,25 @@ def _clearance_check(collisions: CollisionModel, motion: _Sampled) -> Check:
 def _cost_check(
     robot: Robot,
     trajectory: Motion,
+    pool: pin.ModelPool,
     cost: Cost,
     J: float,
     rate: float,  # noqa: N803
     tol: Tolerances,
 ) -> Check:
-    """J recomputed by composite Simpson on at least max(rate, 20 kHz) between the knots."""
-    tf, weight = _simpson_nodes(trajectory.t, max(rate, 20000.0))
-    qf, qdf, qddf = trajectory.states(tf)
-    recomputed = float(weight @ cost(qf, qdf, _torques(robot, qf, qdf, qddf)))
+    """J recomputed by composite 4-point Gauss-Legendre quadrature (exact for polynomials of
+    degree 7) on pieces no longer than 4/rate [s] (at least 10 per interval between the knots,
+    where the motion's acceleration jumps), the torques by RNEA, :data:`CHUNK` nodes at a time."""
+    total = 0.0
+    for nodes, weights in _gauss_nodes(trajectory.t, rate):
+        q, qd, qdd = trajectory.states(nodes)
+        total += float(weights @ cost(q, qd, _torques(robot, pool, q, qd, qdd)))
     return Check(
         "J recomputed",
-        abs(recomputed - J) / max(abs(J), 1e-12),
+        abs(total - J) / max(abs(J), 1e-12),
         tol.cost,
         "relative",
-        f"(∫ f0 dt = {recomputed:.8g}, J = {J:.8g})",
+        f"(∫ f0 dt = {total:.8g}, J = {J:.8g})",
     )
 
 
@@ -493,7 +564,7 @@ def _simulation_checks(
 ) -> list[Check]:
     """Where u(t), integrated with ABA window by window, takes the arm."""
     n = robot.n
-    x_end, defect = _simulate(robot, trajectory, tol.window)
+    x_end, defect = _simulate(robot, trajectory, tol.window, 0.01 * tol.simulation)
     what = "forward simulation of u(t) with ABA"
     return [
         Check(
@@ -581,66 +652,123 @@ def _check_waypoints(
         )
 
 
-def _simpson_nodes(
+_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(4)
+
+
+def _gauss_nodes(
     knots: NDArray[np.float64], rate: float
-) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
-    """Nodes and weights of composite Simpson rules on every interval between ``knots`` [s], with
-    an even number of steps no longer than 1/rate; nodes at an interval's end are taken just
-    inside it (the acceleration jumps at the knots)."""
+) -> Iterator[tuple[NDArray[np.float64], NDArray[np.float64]]]:
+    """Nodes and weights of composite 4-point Gauss-Legendre rules on every interval between
+    ``knots`` [s], in pieces no longer than 4/rate and at least 10 per interval, about
+    :data:`CHUNK` nodes at a time (never a node on a knot: the acceleration jumps there)."""
     dt = np.diff(knots)
-    steps = 2 * np.maximum(1, np.ceil(dt * rate / 2.0)).astype(int)
-    seg = np.repeat(np.arange(dt.size), steps + 1)
-    j = np.arange(seg.size) - np.repeat(np.cumsum(steps + 1) - (steps + 1), steps + 1)
-    m = steps[seg]
-    frac = j / m
-    nodes = knots[seg] + dt[seg] * frac
-    inside = 1e-12 * max(1.0, float(knots[-1]))
-    nodes = np.where(j == m, knots[seg + 1] - inside, nodes)
-    simpson = np.where((j == 0) | (j == m), 1.0, np.where(j % 2 == 1, 4.0, 2.0))
-    return nodes, simpson * dt[seg] / (3.0 * m)
+    pieces = np.maximum(10, np.ceil(dt * rate / 4.0)).astype(np.int64)
+    first = 0
+    while first < dt.size:  # whole intervals, about CHUNK nodes together
+        last = first + 1 + int(np.searchsorted(np.cumsum(4 * pieces[first:]), CHUNK))
+        last = min(max(last, first + 1), dt.size)
+        m = pieces[first:last]
+        seg = np.repeat(np.arange(first, last), m)
+        j = np.arange(seg.size) - np.repeat(np.cumsum(m) - m, m)
+        width = dt[seg] / pieces[seg]
+        left = knots[seg] + j * width
+        nodes = (left[:, None] + 0.5 * width[:, None] * (1.0 + _GAUSS_X[None, :])).ravel()
+        weights = (0.5 * width[:, None] * _GAUSS_W[None, :]).ravel()
+        yield nodes, weights
+        first = last
 
 
 def _simulate(
-    robot: Robot, trajectory: Trajectory, window: float
+    robot: Robot, trajectory: Motion, window: float, accuracy: float
 ) -> tuple[NDArray[np.float64], float]:
     """Integrate θ̈ = ABA(θ, θ̇, u(t) − Dθ̇) under the motion's torques, in restarted windows.
 
-    The torque jumps where the path acceleration changes (the knots), so each window is also cut
-    there. LSODA with the analytic Jacobian (A of eqs. 24-26) switches to an implicit method where
-    strong joint damping makes the dynamics stiff (xarm7: 10 times faster than an explicit
-    Runge-Kutta method). Returns the simulated end state and the largest window defect.
+    The classical Runge-Kutta method (RK4) in equal steps: the torque jumps where the path
+    acceleration changes (the knots), so each window is also cut there. Each window is
+    integrated with steps no longer than :data:`MAX_STEP` (and than 2.5/ρ, ρ the largest rate of
+    the joint damping, |eig H⁻¹D| along the motion: the stiff damping of an arm such as xarm7
+    stays inside the method's stability region), then again with every step halved, until two
+    results differ by at most 15 × ``accuracy`` (RK4's error is then about ``accuracy``) or
+    :data:`MAX_HALVINGS` times. At most :data:`MAX_WINDOWS` windows are simulated, spread evenly
+    over the motion with the last one always among them (a bounded cost however long the
+    motion). Returns the simulated end state and the largest window defect.
     """
-    model, data, n = robot.model, robot.new_data(), robot.n
-
-    def rhs(tau: float, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        u = trajectory.torque(np.array([tau]))[0] - robot.damping * x[n:]
-        return np.concatenate([x[n:], pin.aba(model, data, x[:n], x[n:], u)])
-
-    def jac(tau: float, x: NDArray[np.float64]) -> NDArray[np.float64]:
-        u = trajectory.torque(np.array([tau]))[0]
-        return robot.dynamics_jacobians(x[:n], x[n:], u)[0]
-
-    def state(tau: float) -> NDArray[np.float64]:
-        q, qd, _ = trajectory.states(np.array([tau]))
-        return np.concatenate([q[0], qd[0]])
-
+    model, data = robot.model, robot.new_data()
     te, knots = trajectory.duration, trajectory.t
-    defect, x = 0.0, state(0.0)
-    for w0 in np.arange(0.0, te, window):
+    largest = min(MAX_STEP, 2.5 / max(_damping_rate(robot, trajectory), 1e-300))
+    starts = np.arange(0.0, te, window)
+    if starts.size > MAX_WINDOWS:
+        starts = starts[np.unique(np.linspace(0, starts.size - 1, MAX_WINDOWS).round().astype(int))]
+
+    def acceleration(q: NDArray, v: NDArray, u: NDArray) -> NDArray[np.float64]:
+        return pin.aba(model, data, q, v, u - robot.damping * v)
+
+    def state(t: float) -> NDArray[np.float64]:
+        return np.concatenate([x[0] for x in trajectory.states(np.array([t]))[:2]])
+
+    defect, x = 0.0, np.zeros(2 * robot.n)
+    for w0 in starts:
         w1 = min(w0 + window, te)
-        x = state(w0)
         cuts = np.concatenate([[w0], knots[(knots > w0) & (knots < w1)], [w1]])
-        for a, b in zip(cuts[:-1], cuts[1:], strict=True):
-            sol = solve_ivp(
-                rhs,
-                (a, b - 1e-12 * max(1.0, b)),
-                x,
-                method="LSODA",
-                jac=jac,
-                rtol=1e-10,
-                atol=1e-12,
-            )
-            x = sol.y[:, -1]
+        x = _rk4(acceleration, trajectory, cuts, state(w0), largest, 1)
+        for halving in range(1, MAX_HALVINGS + 1):
+            finer = _rk4(acceleration, trajectory, cuts, state(w0), largest, 2**halving)
+            close = float(np.max(np.abs(finer - x))) <= 15.0 * accuracy
+            x = finer
+            if close:
+                break
         if w1 < te:
             defect = max(defect, float(np.max(np.abs(x - state(w1)))))
     return x, defect
+
+
+def _rk4(
+    acceleration: Callable[[NDArray, NDArray, NDArray], NDArray[np.float64]],
+    trajectory: Motion,
+    cuts: NDArray[np.float64],
+    x: NDArray[np.float64],
+    step: float,
+    split: int,
+) -> NDArray[np.float64]:
+    """RK4 from the state x = (θ, θ̇) at cuts[0] to cuts[-1] on every piece between cuts (each
+    started and ended just inside, where the torque may jump) in ``split`` times as many equal
+    steps as keep them no longer than ``step`` [s]; the torques at every stage time from one
+    batched call."""
+    n = x.size // 2
+    inside = 1e-12 * np.maximum(1.0, cuts)  # a time just beyond a knot may round onto its other
+    a, b = cuts[:-1] + inside[:-1], cuts[1:] - inside[1:]  # side (a task's parts start late)
+    m = split * np.maximum(1, np.ceil((b - a) / step)).astype(np.int64)
+    h = (b - a) / m
+    nodes = 2 * m + 1  # every step's start, middle and end; a piece's last end is b
+    piece = np.repeat(np.arange(a.size), nodes)
+    first = np.cumsum(nodes) - nodes
+    j = np.arange(piece.size) - np.repeat(first, nodes)
+    u = trajectory.torque(a[piece] + 0.5 * h[piece] * j)
+    q, v = x[:n], x[n:]
+    for p in range(a.size):
+        hs = h[p]
+        for t0 in range(first[p], first[p] + 2 * m[p], 2):
+            k1q, k1v = v, acceleration(q, v, u[t0])
+            k2q = v + 0.5 * hs * k1v
+            k2v = acceleration(q + 0.5 * hs * k1q, k2q, u[t0 + 1])
+            k3q = v + 0.5 * hs * k2v
+            k3v = acceleration(q + 0.5 * hs * k2q, k3q, u[t0 + 1])
+            k4q = v + hs * k3v
+            k4v = acceleration(q + hs * k3q, k4q, u[t0 + 2])
+            q = q + hs / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
+            v = v + hs / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
+    return np.concatenate([q, v])
+
+
+def _damping_rate(robot: Robot, trajectory: Motion) -> float:
+    """ρ = max |eig(H⁻¹D)| [1/s] over 9 configurations along the motion (0: no damping)."""
+    if not np.any(robot.damping):
+        return 0.0
+    data = robot.new_data()
+    rate = 0.0
+    for q in trajectory.states(np.linspace(0.0, trajectory.duration, 9))[0]:
+        mass = pin.crba(robot.model, data, q)
+        mass = np.triu(mass) + np.triu(mass, 1).T
+        rates = np.linalg.eigvals(np.linalg.solve(mass, np.diag(robot.damping)))
+        rate = max(rate, float(np.max(np.abs(rates))))
+    return rate
