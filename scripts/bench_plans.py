@@ -3,8 +3,10 @@
 Three plans: the paper's example (``nearopt.plan`` with its defaults), a panda free plan (seeded
 motion, f0 = 1 + 0.001 Σ u²) and the same arm in the work cell of ``bench_cell.py``. For each:
 J, the median wall time of ``--repeat`` plans, the number of stage-1 timings (calls of
-``optimal_timing``) and their share of the wall time. Run it against another checkout of nearopt
-with ``PYTHONPATH=that/checkout python scripts/bench_plans.py`` to compare commits.
+``optimal_timing``) and their share of the wall time, and the median time of the check
+``nearopt plan`` makes before it writes the plan (``verify`` at 1 kHz) against the plan's. Run
+it against another checkout of nearopt with ``PYTHONPATH=that/checkout python
+scripts/bench_plans.py`` to compare commits.
 
     python scripts/bench_plans.py [--repeat 3]
 """
@@ -76,9 +78,12 @@ def main() -> None:
         ),
     }
     plans["paper's example"]()  # the first plan of a process loads what it needs
-    print(f"{'plan':<17}{'J':>10}{'wall [s]':>10}{'timings':>9}{'stage 1 [s]':>13}{'share':>7}")
+    print(
+        f"{'plan':<17}{'J':>10}{'wall [s]':>10}{'timings':>9}{'stage 1 [s]':>13}{'share':>7}"
+        f"{'verify [s]':>12}{'/ wall':>8}"
+    )
     for label, run in plans.items():
-        walls, stage1, calls, result = [], [], 0, None
+        walls, stage1, checks, calls, result = [], [], [], 0, None
         for _ in range(args.repeat):
             with Stage1Clock() as clock:
                 start = time.perf_counter()
@@ -86,12 +91,30 @@ def main() -> None:
                 walls.append(time.perf_counter() - start)
             stage1.append(clock.seconds)
             calls = clock.calls
+            start = time.perf_counter()
+            report = verify_as_the_command(result)
+            checks.append(time.perf_counter() - start)
+            assert report.passed, str(report)
         k = int(np.argsort(walls)[len(walls) // 2])
+        check = float(np.median(checks))
         print(
             f"{label:<17}{result.J:>10.6f}{walls[k]:>10.2f}{calls:>9}{stage1[k]:>13.2f}"
-            f"{100 * stage1[k] / walls[k]:>6.0f}%",
+            f"{100 * stage1[k] / walls[k]:>6.0f}%{check:>12.3f}{100 * check / walls[k]:>7.1f}%",
             flush=True,
         )
+
+
+def verify_as_the_command(result: nearopt.PlanResult) -> nearopt.VerificationReport:
+    """The check ``nearopt plan`` makes before it writes a plan (at 1 kHz, with the plan's cost,
+    J and collision model), spelled so that older checkouts run it too."""
+    return nearopt.verify(
+        result.trajectory,
+        result.robot,
+        rate=1000.0,
+        cost=result.cost,
+        J=result.J,
+        collisions=result.collisions,
+    )
 
 
 if __name__ == "__main__":
