@@ -4,7 +4,9 @@
 robot model with Pinocchio directly: the torques by RNEA (+ D θ̇) from the sampled (θ, θ̇, θ̈), the
 joint limits, the end states, J, and where the torques u(t) take the arm when integrated with ABA.
 It returns a report with the worst value of every check; nothing the planner computed is reused
-but the motion itself.
+but the motion itself. Its memory does not grow with the motion's duration: the samples are
+checked :data:`CHUNK` at a time and a long motion's simulation is bounded by
+:data:`MAX_WINDOWS`.
 """
 
 from __future__ import annotations
@@ -182,10 +184,11 @@ def verify(
     q0, qe
         Expected start and goal [rad]; default: the motion's own ends (then only rest is checked).
     cost, J
-        If both are given, J is recomputed as ∫ f0 dt by Simpson's rule on samples at least at
-        max(rate, 20 kHz), composite on every interval between the times where the motion's
-        acceleration jumps (the trajectory's knot times: across a jump any rule is first-order),
-        and compared with ``J`` (relative ``cost_tolerance``).
+        If both are given, J is recomputed as ∫ f0 dt by composite 4-point Gauss-Legendre
+        quadrature with RNEA's torques (pieces no longer than 4/rate, at least 10 on every
+        interval between the times where the motion's acceleration jumps, the trajectory's knot
+        times: across a jump any rule is first-order) and compared with ``J`` (relative
+        ``cost_tolerance``).
     velocity_limits, position_limits
         Check the robot's joint speed / position limits.
     torque_tolerance
@@ -205,7 +208,8 @@ def verify(
         The forward simulation restarts from the motion's own state every ``window`` s: open-loop
         integration amplifies any error at the rate of the arm's unstable (gravity) modes, so over
         seconds it would measure that instability, not the motion. The largest mismatch at the end
-        of a window is reported as the simulation defect.
+        of a window is reported as the simulation defect. At most :data:`MAX_WINDOWS` windows
+        are simulated (spread over a longer motion, the last one always).
     simulate
         Run the forward simulation (the slowest check); without it, the report holds the checks
         of the samples only.
@@ -234,7 +238,7 @@ def verify(
         simulation_tolerance,
         window,
     )
-    pool = pin.ModelPool(robot.model, 1)
+    pool = robot.new_pool()
     ends = _Sampled.at(trajectory, robot, pool, np.array([0.0, trajectory.duration]))
     start = ends.q[0] if q0 is None else robot.check_configuration(q0, "q0")
     goal = ends.q[-1] if qe is None else robot.check_configuration(qe, "qe")

@@ -145,13 +145,15 @@ def test_only_the_command_line_knows_argparse() -> None:
 
 
 def test_only_the_robot_makes_pinocchio_data() -> None:
-    """Pinocchio's work spaces (pin.Data, one per caller and thread) come from Robot.new_data."""
-    makers = {
-        name
-        for name, path in read_structure().modules.items()
-        if "createData(" in path.read_text(encoding="utf-8")
-    }
-    assert makers == {"nearopt.robot.dynamics"}, makers
+    """Pinocchio's work spaces (pin.Data, one per caller and thread; a pool of model and data
+    for its batched algorithms) come from Robot.new_data and Robot.new_pool."""
+    for maker in ("createData(", "ModelPool("):
+        makers = {
+            name
+            for name, path in read_structure().modules.items()
+            if maker in path.read_text(encoding="utf-8")
+        }
+        assert makers == {"nearopt.robot.dynamics"}, (maker, makers)
 
 
 def test_the_reader_sees_a_cycle_and_a_private_import(tmp_path: Path) -> None:

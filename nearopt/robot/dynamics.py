@@ -510,6 +510,11 @@ class Robot:
         must not be shared between threads). Every part of nearopt gets its data here."""
         return self._model.createData()
 
+    def new_pool(self) -> pin.ModelPool:
+        """A fresh pool of one model and its data, for Pinocchio's batched algorithms
+        (``pin.rneaInParallel``, ``pin.abaInParallel``) on one thread."""
+        return pin.ModelPool(self._model, 1)
+
     def __repr__(self) -> str:
         return f"Robot({self.name!r}, n={self.n}, joints={self.joint_names})"
 
@@ -584,7 +589,7 @@ class Robot:
         if count == 0:
             return np.zeros((0, self.n))
         if self._pool is None:
-            self._pool = pin.ModelPool(self._model, 1)
+            self._pool = self.new_pool()
         tau = np.zeros((self.n, count), order="F")
         pin.rneaInParallel(
             1,
