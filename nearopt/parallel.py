@@ -18,7 +18,7 @@ from typing import TypeVar
 
 from .errors import SolverError
 
-__all__ = ["in_parallel", "cores"]
+__all__ = ["in_parallel", "in_child", "cores"]
 
 T = TypeVar("T")
 
@@ -36,9 +36,9 @@ def in_parallel(tasks: Sequence[Callable[[], T]]) -> list[T]:
     one after the other in this process where ``os.fork`` is missing or this process may run on
     one core only.
 
-    A task should catch what it expects; anything else it raises in a child is raised here as a
-    :class:`~nearopt.SolverError` naming it, after every child has ended. A Ctrl-C here (or an
-    error of the first task) ends the children.
+    A task should catch what it expects; what it raises in a child is raised here (a nearopt
+    error as it was, anything else as a :class:`~nearopt.SolverError` naming it). A Ctrl-C here
+    (or an error of the first task) ends the children.
     """
     if len(tasks) < 2 or not hasattr(os, "fork") or cores() < 2:
         return [task() for task in tasks]
@@ -57,6 +57,15 @@ def in_parallel(tasks: Sequence[Callable[[], T]]) -> list[T]:
     return [first, *rest]
 
 
+def in_child(task: Callable[[], T], what: str = "a parallel part of the plan") -> T:
+    """``task()`` in a forked child process (a copy of this one whose process-wide state, such
+    as OMPL's generator seeded once per process, is its own); here where ``os.fork`` is missing.
+    Errors as :func:`in_parallel`, ``what`` naming the task in them; a Ctrl-C ends the child."""
+    if not hasattr(os, "fork"):
+        return task()
+    return _collect(*_fork(task), what)  # type: ignore[return-value]
+
+
 def _fork(task: Callable[[], object]) -> tuple[int, int]:
     """Start ``task`` in a forked child that writes its pickled outcome to a pipe; returns the
     child's pid and the pipe's end to read."""
@@ -66,10 +75,9 @@ def _fork(task: Callable[[], object]) -> tuple[int, int]:
         gc.freeze()  # the parent's objects stay out of the child's garbage collections
         os.close(read)
         try:
-            reply: tuple[str, object] = ("ok", task())
-            data = pickle.dumps(reply)
+            data = pickle.dumps(("ok", task()))
         except BaseException as exc:  # noqa: BLE001 - reported to the parent
-            data = pickle.dumps(("error", f"{type(exc).__name__}: {exc}"))
+            data = _error(exc)
         with os.fdopen(write, "wb") as stream:
             stream.write(data)
         os._exit(0)
@@ -77,7 +85,22 @@ def _fork(task: Callable[[], object]) -> tuple[int, int]:
     return pid, read
 
 
-def _collect(pid: int, read: int) -> object:
+def _error(exc: BaseException) -> bytes:
+    """A child's error, pickled: a nearopt error itself (if it survives pickling), anything
+    else in words."""
+    from .errors import NearoptError
+
+    if isinstance(exc, NearoptError):
+        try:
+            data = pickle.dumps(("raised", exc))
+            pickle.loads(data)
+            return data
+        except Exception:  # noqa: BLE001 - an error that cannot travel goes in words
+            pass
+    return pickle.dumps(("error", f"{type(exc).__name__}: {exc}"))
+
+
+def _collect(pid: int, read: int, what: str = "a parallel part of the plan") -> object:
     """A child's result (after it has ended); a Ctrl-C while waiting for it ends it."""
     try:
         with os.fdopen(read, "rb") as stream:
@@ -87,10 +110,12 @@ def _collect(pid: int, read: int) -> object:
         raise
     os.waitpid(pid, 0)
     if not data:
-        raise SolverError("a parallel part of the plan ended without an answer (its process died)")
+        raise SolverError(f"{what} ended without an answer (its process died)")
     kind, value = pickle.loads(data)
+    if kind == "raised":
+        raise value
     if kind == "error":
-        raise SolverError(f"a parallel part of the plan failed: {value}")
+        raise SolverError(f"{what} failed: {value}")
     return value
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import nearopt
-from nearopt.parallel import cores, in_parallel
+from nearopt.parallel import cores, in_child, in_parallel
 
 
 def test_forked_tasks_give_the_same_results_in_order() -> None:
@@ -41,3 +41,17 @@ def test_an_error_in_a_child_is_named_here() -> None:
     with pytest.raises(nearopt.SolverError, match="ValueError: no such thing"):
         in_parallel([lambda: 1, fails])
     assert in_parallel([lambda: 1]) == [1]
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="without fork the task runs here")
+def test_a_nearopt_error_in_a_child_comes_back_as_it_was() -> None:
+    """A child's nearopt error is raised here with its type and its values; the result of a
+    task that succeeds comes back from another process."""
+
+    def collides() -> None:
+        raise nearopt.CollisionError("too close", pair=("link", "post"), distance=-0.002)
+
+    with pytest.raises(nearopt.CollisionError, match="too close") as caught:
+        in_child(collides)
+    assert caught.value.pair == ("link", "post") and caught.value.distance == -0.002
+    assert in_child(os.getpid) != os.getpid()

@@ -13,16 +13,14 @@ forked child seeded afresh, so that a request gives the same paths whatever ran 
 
 from __future__ import annotations
 
-import gc
 import os
-import pickle
-import signal
 import time
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..errors import CollisionError, ConfigurationError, SolverError
+from ..errors import CollisionError, ConfigurationError
+from ..parallel import in_child
 from ..path import BSplinePath, StraightPath
 
 if TYPE_CHECKING:
@@ -64,40 +62,11 @@ def collision_free_path(
     )
     if not hasattr(os, "fork") or _seeded:
         return search_paths(collisions, q0, qe, **arguments)  # type: ignore[arg-type]
-    read, write = os.pipe()
-    pid = os.fork()
-    if pid == 0:  # the child: search, send the control points (or the error) back, exit
-        # the parent's objects stay out of the child's garbage collections (a long-running
-        # process would otherwise have the child traverse its whole inherited heap)
-        gc.freeze()
-        os.close(read)
-        try:
-            found = search_paths(collisions, q0, qe, **arguments)  # type: ignore[arg-type]
-            reply: tuple[str, object] = ("ok", [p.control_points for p in found])
-        except CollisionError as exc:
-            reply = ("collision", str(exc))
-        except BaseException as exc:  # noqa: BLE001 - reported to the parent
-            reply = ("error", f"{type(exc).__name__}: {exc}")
-        with os.fdopen(write, "wb") as stream:
-            stream.write(pickle.dumps(reply))
-        os._exit(0)
-    os.close(write)
-    try:
-        with os.fdopen(read, "rb") as stream:
-            data = stream.read()
-    except BaseException:  # Ctrl-C: the child goes too
-        os.kill(pid, signal.SIGKILL)
-        os.waitpid(pid, 0)
-        raise
-    os.waitpid(pid, 0)
-    if not data:
-        raise SolverError("the OMPL search ended without an answer (its process died)")
-    kind, value = pickle.loads(data)
-    if kind == "collision":
-        raise CollisionError(str(value))
-    if kind == "error":
-        raise SolverError(f"the OMPL search failed: {value}")
-    return [BSplinePath(c, breaks if c.shape[0] == control_points + 2 else None) for c in value]  # type: ignore[union-attr]
+    found = in_child(
+        lambda: [p.control_points for p in search_paths(collisions, q0, qe, **arguments)],  # type: ignore[arg-type]
+        "the OMPL search",
+    )
+    return [BSplinePath(c, breaks if c.shape[0] == control_points + 2 else None) for c in found]
 
 
 SEARCH_CHECKS = 20_000  # validity and motion checks one OMPL search may take (about 1-2 s)
