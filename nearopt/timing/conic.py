@@ -92,7 +92,8 @@ def solve_conic(
         Lower and upper limits of the torque samples, each (n·2N,) (±inf where none), when they
         are not among ``rows``. The torques are then variables v = T (z, p) + u0 of their own,
         bounded directly: with p, T's rows are dense in p, and each is then held once instead of
-        in the cost's cone and both sides of a limit (a much sparser problem).
+        in the cost's cone and both sides of a limit (a much sparser problem). Without an energy
+        term only the torques with a finite limit are variables (the others have no role).
     tolerance
         Clarabel's gap and feasibility tolerances.
     time_limit
@@ -103,14 +104,19 @@ def solve_conic(
     big_n, nz = ds.size, ds.size - 1
     n_p = 0 if p_bounds is None else p_bounds[0].size
     n = torque[0].shape[0] // (2 * big_n)
-    at = _Columns(nz, n_p, big_n, 0 if torque_limits is None else n * 2 * big_n)
+    energy = bool(np.any(weights > 0))
+    if torque_limits is not None and not energy:  # only the torques held are needed
+        held = np.flatnonzero(np.isfinite(torque_limits[0]) | np.isfinite(torque_limits[1]))
+        torque = (sp.csr_matrix(torque[0])[held], np.asarray(torque[1])[held])
+        torque_limits = (torque_limits[0][held], torque_limits[1][held])
+    at = _Columns(nz, n_p, big_n, 0 if torque_limits is None else torque_limits[0].size)
     pb = _Builder(big_n)
     _linear_block(pb, clarabel, at, rows, z_upper, p_bounds, torque_limits)
     _root_block(pb, clarabel, at)
     _time_block(pb, clarabel, at, ds)
     q_vec = np.zeros(at.nx)
     q_vec[at.it : at.it + big_n] = 1.0
-    if bool(np.any(weights > 0)):
+    if energy:
         _energy_block(pb, clarabel, at, ds, weights, torque, n)
         q_vec[at.ie : at.ie + big_n] = 1.0
     else:  # no energy: pin e = 0
