@@ -16,7 +16,7 @@ import signal
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
-from .errors import SolverError
+from .errors import NearoptError, SolverError
 
 __all__ = ["in_parallel", "in_child", "cores"]
 
@@ -88,8 +88,6 @@ def _fork(task: Callable[[], object]) -> tuple[int, int]:
 def _error(exc: BaseException) -> bytes:
     """A child's error, pickled: a nearopt error itself (if it survives pickling), anything
     else in words."""
-    from .errors import NearoptError
-
     if isinstance(exc, NearoptError):
         try:
             data = pickle.dumps(("raised", exc))

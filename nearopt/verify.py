@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass
+from operator import attrgetter
 from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
@@ -387,6 +388,11 @@ def _sample_times(duration: float, rate: float) -> Iterator[NDArray[np.float64]]
         yield t
 
 
+_WORST = attrgetter(
+    "worst"
+)  # of two checks of one quantity, max keeps the worse (the first of equals)
+
+
 def _sample_checks(
     robot: Robot,
     trajectory: Motion,
@@ -407,19 +413,12 @@ def _sample_checks(
         count += t.size
         chunk = _limit_checks(robot, motion, tol, velocity_limits, position_limits)
         limits = (
-            [max(a, b, key=_badness) for a, b in zip(limits, chunk, strict=True)]
-            if limits
-            else chunk
+            [max(a, b, key=_WORST) for a, b in zip(limits, chunk, strict=True)] if limits else chunk
         )
         if collisions is not None and collisions.pairs:
             closest = _clearance_check(collisions, motion)
-            clearance = closest if clearance is None else max(clearance, closest, key=_badness)
+            clearance = closest if clearance is None else max(clearance, closest, key=_WORST)
     return limits, clearance, count
-
-
-def _badness(check: Check) -> float:
-    """Which of two checks of the same quantity is the worse (the first of equals)."""
-    return check.worst
 
 
 def _limit_checks(
@@ -768,11 +767,9 @@ def _damping_rate(robot: Robot, trajectory: Motion) -> float:
     """ρ = max |eig(H⁻¹D)| [1/s] over 9 configurations along the motion (0: no damping)."""
     if not np.any(robot.damping):
         return 0.0
-    data = robot.new_data()
-    rate = 0.0
-    for q in trajectory.states(np.linspace(0.0, trajectory.duration, 9))[0]:
-        mass = pin.crba(robot.model, data, q)
-        mass = np.triu(mass) + np.triu(mass, 1).T
-        rates = np.linalg.eigvals(np.linalg.solve(mass, np.diag(robot.damping)))
-        rate = max(rate, float(np.max(np.abs(rates))))
-    return rate
+    damping = np.diag(robot.damping)
+    configurations = trajectory.states(np.linspace(0.0, trajectory.duration, 9))[0]
+    return max(
+        float(np.max(np.abs(np.linalg.eigvals(np.linalg.solve(robot.mass_matrix(q), damping)))))
+        for q in configurations
+    )

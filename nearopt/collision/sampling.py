@@ -13,7 +13,6 @@ forked child seeded afresh, so that a request gives the same paths whatever ran 
 
 from __future__ import annotations
 
-import os
 import time
 from typing import TYPE_CHECKING
 
@@ -60,7 +59,7 @@ def collision_free_path(
         clearance=clearance,
         attempts=attempts,
     )
-    if not hasattr(os, "fork") or _seeded:
+    if _seeded:  # OMPL runs in this process already (seeded here): it searches here again
         return search_paths(collisions, q0, qe, **arguments)  # type: ignore[arg-type]
     found = in_child(
         lambda: [p.control_points for p in search_paths(collisions, q0, qe, **arguments)],  # type: ignore[arg-type]
