@@ -388,7 +388,7 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     if args.verify:
         print(report, file=out)
     report.raise_if_failed()  # nothing is written for a motion that fails
-    _write(result, args, outputs, plots, out)
+    _write(result, args, outputs, plots, out, interrupt)
     if args.show:
         _show(result, out)
     return 130 if result.status == StopReason.INTERRUPTED else 0
@@ -460,9 +460,12 @@ def _write(
     outputs: dict[str, Output],
     plots: Path | None,
     out: TextIO,
+    interrupt: _Interrupt,
 ) -> None:
     """Produce every output first, then write them all (a failure leaves no file behind); the
-    sampling warnings after success only."""
+    sampling warnings after success only. A second Ctrl-C while they are produced aborts even
+    where a library swallowed its exception (trimesh catches BaseException around its optional
+    imports, which the viewer's page makes)."""
     contents: dict[Output, str | bytes] = {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SamplingWarning)
@@ -485,6 +488,7 @@ def _write(
                 for name, png in rendered.items()
             }
         )
+    interrupt.abort_if_second()
     for name in write_outputs(contents):
         print(f"wrote {name}", file=out)
     for message in dict.fromkeys(str(w.message) for w in caught):  # after success only
@@ -581,6 +585,11 @@ class _Interrupt:
         if self.count > 1:
             raise _Abort
         raise KeyboardInterrupt
+
+    def abort_if_second(self) -> None:
+        """Raise the abort if a second SIGINT came (its exception may have been caught)."""
+        if self.count > 1:
+            raise _Abort
 
     def armed(self) -> contextlib.AbstractContextManager:
         """While planning: SIGINT raises KeyboardInterrupt once; afterwards, any SIGINT aborts."""
