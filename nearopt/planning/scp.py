@@ -21,6 +21,11 @@ exactly by stage 1 and accepted if its J is lower; ρ grows after steps that did
 model predicted and shrinks after poor or rejected ones. Every accepted iterate is therefore a
 path from θ0 to θe timed optimally by stage 1: feasible, at rest at both ends.
 
+The convex model is solved by nearopt's own interior-point method with a dense Newton system in
+(b, Δp) (:func:`~nearopt.timing.solve_joint`: a few hundred variables, 15–25 iterations, 3–4
+times faster than Clarabel's conic form of it), from the iterate's own timing; where it does not
+converge, Clarabel's second-order cone program solves the model instead.
+
 The iterates are timed on the coarser grid ``SCPOptions.grid`` (64 segments by default) and the
 best path is timed on the plan's grid at the end.
 
@@ -43,7 +48,14 @@ from ..cost import TorqueCost
 from ..errors import InfeasiblePathError, SolverError, UnreachablePoseError
 from ..path import BSplinePath
 from ..robot.kinematics import ToolPose, inverse_kinematics, task_jacobian
-from ..timing import Discretisation, LinearRows, is_solved, optimal_timing, solve_conic
+from ..timing import (
+    Discretisation,
+    LinearRows,
+    is_solved,
+    optimal_timing,
+    solve_conic,
+    solve_joint,
+)
 from .linearisation import PathBasis, path_basis, row_path_jacobian
 from .records import MethodOutcome, Run, SCPOptions, StopReason
 
@@ -151,7 +163,7 @@ def sequential_convex(
             robot, disc, z, basis, p, path_of(p), radius * scale, collisions, start, via, goal
         )
         j0 = timing.objective
-        step = _solve_model(disc, weights, model, p, radius * scale, lower, upper)
+        step = _solve_model(disc, weights, model, z, p, radius * scale, lower, upper)
         if step is None:  # numerical trouble: a smaller step is a better-conditioned model
             failures += 1
             radius *= 0.25
@@ -619,19 +631,36 @@ def _solve_model(
     disc: Discretisation,
     weights: NDArray[np.float64],
     model: _Model,
+    z: NDArray[np.float64],
     p: NDArray[np.float64],
     radius: NDArray[np.float64],
     lower: NDArray[np.float64],
     upper: NDArray[np.float64],
 ) -> tuple[NDArray[np.float64], float, NDArray[np.float64]] | None:
-    """The convex model's best step Δp within the trust region, its predicted J and timing."""
+    """The convex model's best step Δp within the trust region, its predicted J and timing:
+    by nearopt's joint interior-point method (:func:`~nearopt.timing.solve_joint`) from the
+    model's own timing z, by Clarabel where that does not converge."""
     bounds = (np.maximum(-radius, lower - p), np.minimum(radius, upper - p))
+    rows = LinearRows(model.matrix, model.lower, model.upper)
+    torque = (model.torque, model.torque_const)
+    joint = solve_joint(
+        disc.ds,
+        weights,
+        rows,
+        torque,
+        disc.z_upper,
+        p_bounds=bounds,
+        torque_limits=model.torque_limits,
+        start=z,
+    )
+    if joint.converged:
+        return np.clip(joint.p, *bounds), joint.objective, joint.z
     for tolerance in (1e-8, 1e-7, 1e-6):
         sol = solve_conic(
             disc.ds,
             weights,
-            LinearRows(model.matrix, model.lower, model.upper),
-            (model.torque, model.torque_const),
+            rows,
+            torque,
             disc.z_upper,
             p_bounds=bounds,
             torque_limits=model.torque_limits,

@@ -55,6 +55,7 @@ from .conic import ConicSolution, is_solved, solve_conic
 from .discretisation import Discretisation, LinearRows, RowBlocks
 from .driver import TimingResult, optimal_timing
 from .interior import InteriorSolution, load_kernel, solve_interior
+from .joint import JointSolution, solve_joint
 from .problem import (
     MAX_GRID,
     SPEED_SAFETY,
@@ -95,6 +96,8 @@ __all__ = [
     "RowBlocks",
     "InteriorSolution",
     "solve_interior",
+    "JointSolution",
+    "solve_joint",
     "load_kernel",
     "ConicSolution",
     "solve_conic",

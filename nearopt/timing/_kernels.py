@@ -986,3 +986,38 @@ def _extremes(cl, cr, off, xs, ys, count):  # pragma: no cover - compiled
         hi = max(hi, value)
         low = min(low, value)
     return hi, low
+
+
+@_jit(error_model="numpy")
+def gram_add(indptr, indices, data, d, out):  # pragma: no cover - compiled
+    """out += Σ_r d_r a_r a_rᵀ in the lower triangle, a_r the rows of a CSR matrix with sorted
+    columns (rows with d_r = 0 skipped): the joint solver's Newton matrix
+    (:mod:`nearopt.timing.joint`)."""
+    for r in range(indptr.size - 1):
+        dr = d[r]
+        if dr == 0.0:
+            continue
+        first, end = indptr[r], indptr[r + 1]
+        for a in range(first, end):
+            va = dr * data[a]
+            ia = indices[a]
+            for b in range(first, a + 1):
+                out[ia, indices[b]] += va * data[b]
+
+
+@_jit()
+def mirror(out):  # pragma: no cover - compiled
+    """Copy a square matrix's lower triangle onto its upper one."""
+    for i in range(out.shape[0]):
+        for j in range(i):
+            out[j, i] = out[i, j]
+
+
+@_jit(error_model="numpy")
+def segment_sums(indptr, indices, data, weight, segment, out):  # pragma: no cover - compiled
+    """out[:, segment[r]] += weight_r a_r over the rows a_r of a CSR matrix."""
+    for r in range(indptr.size - 1):
+        w = weight[r]
+        k = segment[r]
+        for a in range(indptr[r], indptr[r + 1]):
+            out[indices[a], k] += w * data[a]

@@ -367,8 +367,9 @@ def _start(
 
 
 def load_kernel() -> None:
-    """Load the compiled kernel into this process now (compiling it if no cached copy fits), by
-    solving a small problem: about 1 s when cached, 10–20 s the first time on a machine.
+    """Load the compiled kernels into this process now (compiling them if no cached copy fits),
+    by solving a small problem: about 1 s when cached, 10–20 s the first time on a machine
+    (stage 2's joint solver's loops too).
 
     The first stage-1 solve of a process does this by itself; call it before forking children
     that should not touch the file system (or cannot read the package's folder after dropping
@@ -410,6 +411,19 @@ def load_kernel() -> None:
         interior=inside,
     )
     solve_interior(Discretisation(problem), np.array([0.1]))
+    _load_joint_kernels()
+
+
+def _load_joint_kernels() -> None:
+    """Stage 2's compiled loops (:mod:`nearopt.timing.joint`), on a 2 × 2 example."""
+    from ._kernels import gram_add, mirror, segment_sums
+
+    indptr, indices = np.array([0, 2], dtype=np.int32), np.array([0, 1], dtype=np.int32)
+    data = np.array([1.0, 2.0])
+    out = np.zeros((2, 2))
+    gram_add(indptr, indices, data, np.ones(1), out)
+    mirror(out)
+    segment_sums(indptr, indices, data, np.ones(1), np.zeros(1, dtype=np.int64), out)
 
 
 def _compiled():  # noqa: ANN202 - numba's dispatcher
