@@ -16,7 +16,7 @@ import numba
 import numpy as np
 
 
-def _jit(**options: object):  # noqa: ANN202 - numba's decorator
+def cached_jit(**options: object):  # noqa: ANN202 - numba's decorator
     """``numba.njit`` with its machine code cached beside this file or, where that folder and the
     user's home cannot be written (a read-only install run by a user without a home), in a
     private folder of the temporary directory."""
@@ -39,13 +39,13 @@ ROUNDING = 1e-13  # relative error of a sum of a few hundred terms in double pre
 FAST = {"nsz", "arcp", "contract", "reassoc"}
 
 
-def _inline(**options: object):  # noqa: ANN202 - numba's decorator
+def inline_jit(**options: object):  # noqa: ANN202 - numba's decorator
     """A helper of a kernel, inlined into it by numba before compilation (the same machine code
     as one function: the kernel's sums are reassociated as before)."""
     return numba.njit(inline="always", **options)
 
 
-@_jit(fastmath=FAST, error_model="numpy")
+@cached_jit(fastmath=FAST, error_model="numpy")
 def iterate(
     z,
     s,
@@ -132,7 +132,7 @@ def iterate(
     return RUNNING, iterations, f_total
 
 
-@_inline(fastmath=FAST, error_model="numpy")
+@inline_jit(fastmath=FAST, error_model="numpy")
 def _at(z, b, lam, hinv, croot, hdiag, rd, rd_size, rhs, hoff, q):  # pragma: no cover
     """b, λ = √b, 1/(2λ) and −1/(4λ³) at the knots from z; the sums of an iteration zeroed."""
     big_n = hoff.size
@@ -152,7 +152,7 @@ def _at(z, b, lam, hinv, croot, hdiag, rd, rd_size, rhs, hoff, q):  # pragma: no
             q[i, k] = 0.0
 
 
-@_inline(fastmath=FAST, error_model="numpy")
+@inline_jit(fastmath=FAST, error_model="numpy")
 def _energy_sums(
     e_left, e_cl, e_cr, e_d, e_node, e_const, e_w, b, lam, hinv, croot, q
 ):  # pragma: no cover - compiled
@@ -184,7 +184,7 @@ def _energy_sums(
                 q[4, k] += wt * u * curv
 
 
-@_inline(fastmath=FAST, error_model="numpy")
+@inline_jit(fastmath=FAST, error_model="numpy")
 def _objective(ds, lam, hinv, croot, q, f_scale, rd, rd_size, hdiag, hoff):  # pragma: no cover
     """F = Σ t_k (1 + q_k) with t_k = 2Δσ_k / (λ_k + λ_k+1), its gradient into rd and its
     Hessian into hdiag, hoff; returns F."""
@@ -214,7 +214,7 @@ def _objective(ds, lam, hinv, croot, q, f_scale, rd, rd_size, hdiag, hoff):  # p
     return f_total
 
 
-@_inline(fastmath=FAST, error_model="numpy")
+@inline_jit(fastmath=FAST, error_model="numpy")
 def _rows(
     z, s, y, left, cl, cr, sd, node, const, b, lam, hinv, croot,
     gl, gr, rp, w, inv_s, rd, rd_size, hdiag, hoff, rhs,
@@ -264,7 +264,7 @@ def _rows(
     return gap, rp_max
 
 
-@_inline(fastmath=FAST, error_model="numpy")
+@inline_jit(fastmath=FAST, error_model="numpy")
 def _factor(hdiag, hoff, scale, dd, ll):  # pragma: no cover - compiled
     """L D Lᵀ of D M D (M tridiagonal: hdiag, hoff; D = diag(scale)) into dd, ll, shifted by
     the smallest multiple of its size that makes it positive definite; False if none does."""
@@ -292,7 +292,7 @@ def _factor(hdiag, hoff, scale, dd, ll):  # pragma: no cover - compiled
     return ok
 
 
-@_inline(fastmath=FAST, error_model="numpy")
+@inline_jit(fastmath=FAST, error_model="numpy")
 def _step(
     z, s, y, left, gl, gr, rp, w, inv_s, rd, rhs, scale, dd, ll,
     dz, dzx, dsl, dy, mu, gap, tau,
@@ -358,7 +358,7 @@ def _step(
     return step
 
 
-@_jit()
+@cached_jit()
 def _first_drop(a, b, c, t_max):  # pragma: no cover - compiled
     """The first t in (0, t_max] where a + b t² + c t < 0 (a ≥ 0), or t_max if none."""
     if a == 0.0 and (c < 0.0 or (c == 0.0 and b < 0.0)):
@@ -385,7 +385,7 @@ def _first_drop(a, b, c, t_max):  # pragma: no cover - compiled
     return best
 
 
-@_jit()
+@cached_jit()
 def _below_on(da, db, dc, t_max):  # pragma: no cover - compiled
     """Whether da + db t² + dc t ≥ 0 for every t in [0, t_max] (t_max may be inf)."""
     if da < 0.0:
@@ -402,7 +402,7 @@ def _below_on(da, db, dc, t_max):  # pragma: no cover - compiled
     return True
 
 
-@_jit()
+@cached_jit()
 def redundant_rows(order, starts, left, cl, cr, sd, node, const, ds, cap_b):  # pragma: no cover
     """The rows at one sample that another row at it implies, and each sample's bound on b.
 
@@ -476,7 +476,7 @@ def redundant_rows(order, starts, left, cl, cr, sd, node, const, ds, cap_b):  # 
     return drop, b_max
 
 
-@_jit()
+@cached_jit()
 def _clip(xs, ys, count, a, b, c, out_x, out_y):  # pragma: no cover - compiled
     """The convex polygon (xs, ys)[:count] cut by a x + b y + c ≤ 0 (Sutherland–Hodgman), into
     out_x, out_y; returns its vertex count, or −1 if that would not fit in out_x (a polygon
@@ -503,7 +503,7 @@ def _clip(xs, ys, count, a, b, c, out_x, out_y):  # pragma: no cover - compiled
     return kept
 
 
-@_jit()
+@cached_jit()
 def _cut(xs, ys, count, a, b, c, tx, ty):  # pragma: no cover - compiled
     """:func:`_clip` in place: the polygon (xs, ys) cut by a x + b y + c ≤ 0 (tx, ty scratch)."""
     count = _clip(xs, ys, count, a, b, c, tx, ty)
@@ -513,7 +513,7 @@ def _cut(xs, ys, count, a, b, c, tx, ty):  # pragma: no cover - compiled
     return count
 
 
-@_jit()
+@cached_jit()
 def needed_inside(
     seg_rows,
     row_cl,
@@ -596,7 +596,7 @@ def needed_inside(
     return need_up, need_lo
 
 
-@_jit()
+@cached_jit()
 def _polygon(
     k, seg_rows, row_cl, row_cr, row_off, row_lo, row_up, cap_b, slack, xs, ys, tx, ty
 ):  # pragma: no cover - compiled
@@ -631,7 +631,7 @@ def _polygon(
     return count
 
 
-@_jit()
+@cached_jit()
 def envelope_rows(
     seg_rows,
     row_cl,
@@ -741,7 +741,7 @@ def envelope_rows(
     )
 
 
-@_jit()
+@cached_jit()
 def _curvatures(pcl, pcr, poff, k, j, kappa):  # pragma: no cover - compiled
     """κ_p, the second differences of joint j's quantity at segment k's points (its
     coefficients of b_k and b_k+1 and its constant, from those of the values), at the knots
@@ -761,7 +761,7 @@ def _curvatures(pcl, pcr, poff, k, j, kappa):  # pragma: no cover - compiled
             kappa[c, last] = kappa[c, last - 1]
 
 
-@_jit()
+@cached_jit()
 def _may_bind(
     pcl, pcr, poff, k, j, kappa, bx, by, lo, up, slack, xs, ys, count
 ):  # pragma: no cover - compiled
@@ -793,7 +793,7 @@ def _may_bind(
     return open_up or open_lo
 
 
-@_jit()
+@cached_jit()
 def _sums(
     k, j, pcl, pcr, poff, kappa, lo, up, slack, cap_b, xs, ys, count,
     c_pt, c_joint, c_val, c_up, c_lo, found,
@@ -848,7 +848,7 @@ def _sums(
     return found
 
 
-@_jit()
+@cached_jit()
 def _touching(
     bx, by, lo, up, slack, touch, xs, ys, tx, ty, count,
     c_joint, c_val, c_up, c_lo, found,
@@ -889,7 +889,7 @@ def _touching(
     return count
 
 
-@_jit()
+@cached_jit()
 def _one_sided(
     k, bx, by, lo, up, merge, xs, ys, count,
     c_pt, c_joint, c_val, c_up, c_lo, found,
@@ -950,21 +950,21 @@ def _one_sided(
     return out
 
 
-@_jit()
+@cached_jit()
 def _grow(a, size):  # pragma: no cover - compiled
     out = np.empty(size)
     out[: a.size] = a
     return out
 
 
-@_jit()
+@cached_jit()
 def _grow_int(a, size):  # pragma: no cover - compiled
     out = np.empty(size, dtype=np.int64)
     out[: a.size] = a
     return out
 
 
-@_jit()
+@cached_jit()
 def _sign_on(cl, cr, off, xs, ys, count):  # pragma: no cover - compiled
     """+1 where cl x + cr y + off ≥ 0 on every vertex of the polygon, −1 where it is ≤ 0 on
     all (and not ≥ 0 on all), else 0."""
@@ -976,7 +976,7 @@ def _sign_on(cl, cr, off, xs, ys, count):  # pragma: no cover - compiled
     return 0.0
 
 
-@_jit()
+@cached_jit()
 def _extremes(cl, cr, off, xs, ys, count):  # pragma: no cover - compiled
     """The largest and the smallest value of cl x + cr y + off over the polygon's vertices."""
     hi = -np.inf
@@ -986,38 +986,3 @@ def _extremes(cl, cr, off, xs, ys, count):  # pragma: no cover - compiled
         hi = max(hi, value)
         low = min(low, value)
     return hi, low
-
-
-@_jit(error_model="numpy")
-def gram_add(indptr, indices, data, d, out):  # pragma: no cover - compiled
-    """out += Σ_r d_r a_r a_rᵀ in the lower triangle, a_r the rows of a CSR matrix with sorted
-    columns (rows with d_r = 0 skipped): the joint solver's Newton matrix
-    (:mod:`nearopt.timing.joint`)."""
-    for r in range(indptr.size - 1):
-        dr = d[r]
-        if dr == 0.0:
-            continue
-        first, end = indptr[r], indptr[r + 1]
-        for a in range(first, end):
-            va = dr * data[a]
-            ia = indices[a]
-            for b in range(first, a + 1):
-                out[ia, indices[b]] += va * data[b]
-
-
-@_jit()
-def mirror(out):  # pragma: no cover - compiled
-    """Copy a square matrix's lower triangle onto its upper one."""
-    for i in range(out.shape[0]):
-        for j in range(i):
-            out[j, i] = out[i, j]
-
-
-@_jit(error_model="numpy")
-def segment_sums(indptr, indices, data, weight, segment, out):  # pragma: no cover - compiled
-    """out[:, segment[r]] += weight_r a_r over the rows a_r of a CSR matrix."""
-    for r in range(indptr.size - 1):
-        w = weight[r]
-        k = segment[r]
-        for a in range(indptr[r], indptr[r + 1]):
-            out[indices[a], k] += w * data[a]

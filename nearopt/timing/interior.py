@@ -415,15 +415,27 @@ def load_kernel() -> None:
 
 
 def _load_joint_kernels() -> None:
-    """Stage 2's compiled loops (:mod:`nearopt.timing.joint`), on a 2 × 2 example."""
-    from ._kernels import gram_add, mirror, segment_sums
+    """Stage 2's compiled loops (:mod:`nearopt.timing.joint`), on a one-joint example with an
+    energy term: two segments, one further variable and one row over both."""
+    import scipy.sparse as sp
 
-    indptr, indices = np.array([0, 2], dtype=np.int32), np.array([0, 1], dtype=np.int32)
-    data = np.array([1.0, 2.0])
-    out = np.zeros((2, 2))
-    gram_add(indptr, indices, data, np.ones(1), out)
-    mirror(out)
-    segment_sums(indptr, indices, data, np.ones(1), np.zeros(1, dtype=np.int64), out)
+    from .discretisation import LinearRows
+    from .joint import solve_joint
+
+    torque = (
+        sp.csr_matrix(np.array([[1.0, 0.1], [0.5, 0.0], [1.0, -0.1], [0.5, 0.0]])),
+        np.zeros(4),
+    )
+    solve_joint(
+        np.array([0.5, 0.5]),
+        np.array([0.1]),
+        LinearRows(sp.csr_matrix(np.array([[1.0, 1.0]])), np.array([-np.inf]), np.array([5.0])),
+        torque,
+        np.array([np.inf]),
+        p_bounds=(np.array([-1.0]), np.array([1.0])),
+        torque_limits=(np.full(4, -10.0), np.full(4, 10.0)),
+        start=np.array([1.0]),
+    )
 
 
 def _compiled():  # noqa: ANN202 - numba's dispatcher

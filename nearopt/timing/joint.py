@@ -16,9 +16,10 @@ their KKT system per iteration; here the Newton system is formed directly in (z,
 
     (∇²F + Σ_r (y_r/s_r) a_r a_rᵀ) Δx = …,
 
-dense and of the size of x, summed over the rows' few nonzeros by a compiled loop
-(:func:`~nearopt.timing._kernels.gram_add`), and factorised by Cholesky (LAPACK). Equality rows
-(via-points, a goal pose) are kept exactly by a Schur complement on their multipliers.
+dense and of the size of x, summed over the rows' few nonzeros by compiled loops
+(:mod:`nearopt.timing._joint_kernels`), and factorised by Cholesky (LAPACK, one thread).
+Equality rows (via-points, a goal pose) are kept exactly by a Schur complement on their
+multipliers.
 
 The method is Mehrotra's predictor-corrector with an infeasible start (Nocedal & Wright,
 *Numerical Optimization*, §14.2 and §19.3): every finite side of a row gets a slack s > 0 and a
@@ -167,14 +168,14 @@ class _Problem:
             self.t_count, self.t_scale, self.u0 = n2, t_scale, np.asarray(torque[1], dtype=float)
             self.t_weight, self.t_seg = weights[joint], np.where(r < big_n, r, r - big_n)
         else:
-            self.t_count = 0
+            self.t_count, self.t_scale, self.u0 = 0, np.zeros(0), np.zeros(0)
+            self.t_weight, self.t_seg = np.zeros(0), np.zeros(0, dtype=np.int64)
         m_rows, m_lo, m_hi, self.e_mat, self.e_rhs = _linear_block(rows, columns)
         z_hi = np.where(np.isfinite(z_upper), z_upper / self.z_scale, np.inf)
         self.mat = sp.vstack([t_rows, m_rows, sp.eye(self.nx, format="csr")]).tocsr()
         self.mat.sort_indices()
-        self.mat_t = self.mat.T.tocsr()
         self.top = self.mat[: self.t_count]  # the energy's torque rows
-        self.top_t = self.top.T.tocsr()
+        self.e_dense = np.ascontiguousarray(self.e_mat.toarray())
         lo = np.concatenate([t_lo, m_lo, np.zeros(self.nz), p_bounds[0] / self.p_scale])
         hi = np.concatenate([t_hi, m_hi, z_hi, p_bounds[1] / self.p_scale])
         self.fin_lo, self.fin_hi = np.isfinite(lo), np.isfinite(hi)
@@ -200,41 +201,6 @@ class _Problem:
     def value(self, x: NDArray[np.float64]) -> float:
         """F(x), scaled."""
         return float(np.sum(self._segments(x)[2])) * self.f_scale
-
-    def derivatives(
-        self, x: NDArray[np.float64], newton: NDArray[np.float64]
-    ) -> tuple[float, NDArray[np.float64], NDArray[np.float64]]:
-        """F(x) and ∇F(x), scaled; ∇²F(x) but for the energy's curvature along the torque rows
-        added into the lower triangle of ``newton``; that curvature per torque row (the
-        coefficient of a_r a_rᵀ)."""
-        from ._kernels import segment_sums
-
-        lam, y, g, u = self._segments(x)
-        g = g * self.f_scale
-        safe = np.where(lam > 0.0, lam, np.inf)
-        dl = 0.5 / safe * self.z_scale  # dλ/dx at the free knots
-        d2l = -0.25 / safe**3 * self.z_scale**2
-        gy, gyy = -g / y, 2.0 * g / y**2  # ∂g/∂y, ∂²g/∂y²
-        grad = np.zeros(self.nx)
-        grad[: self.nz] = (gy[:-1] + gy[1:]) * dl
-        knots = np.arange(self.nz)
-        newton[knots, knots] += (gyy[:-1] + gyy[1:]) * dl * dl + (gy[:-1] + gy[1:]) * d2l
-        newton[knots[1:], knots[:-1]] += gyy[1:-1] * dl[:-1] * dl[1:]
-        if not self.energy:
-            return float(np.sum(g)), grad, np.zeros(0)
-        y_r = y[self.t_seg]
-        curvature = 2.0 * self.f_scale * self.ds[self.t_seg] * self.t_weight / y_r  # ∂²g/∂u²
-        slope = curvature * u  # ∂g/∂u
-        top = self.top
-        grad += self.top_t @ (slope * self.t_scale)
-        # ∂²g/∂u∂y = −slope/y: Σ_r of it along a_r per segment, then along ∇y_k
-        per_segment = np.zeros((self.nx, self.big_n))
-        mixed = -slope / y_r * self.t_scale
-        segment_sums(top.indptr, top.indices, top.data, mixed, self.t_seg, per_segment)
-        cross = per_segment[:, 1:] * dl + per_segment[:, :-1] * dl  # (nx, nz)
-        newton[:, : self.nz] += np.tril(cross)
-        newton[: self.nz, : self.nz] += np.tril(cross[: self.nz].T)
-        return float(np.sum(g)), grad, curvature * self.t_scale**2
 
 
 def _row_scale(
@@ -313,7 +279,7 @@ class _State:
 class _Newton:
     """The factorised Newton matrix and, with equalities, the Schur complement E H⁻¹ Eᵀ."""
 
-    def __init__(self, matrix: NDArray[np.float64], e_mat: sp.csr_matrix) -> None:
+    def __init__(self, matrix: NDArray[np.float64], e_mat: NDArray[np.float64]) -> None:
         try:
             self.factor = la.cho_factor(matrix, lower=True, check_finite=False)
         except la.LinAlgError:  # not positive definite to rounding: a tiny regularisation
@@ -323,7 +289,7 @@ class _Newton:
             )
         self.e_mat = e_mat
         if e_mat.shape[0]:
-            self.h_et = la.cho_solve(self.factor, e_mat.T.toarray(), check_finite=False)
+            self.h_et = la.cho_solve(self.factor, e_mat.T, check_finite=False)
             schur = e_mat @ self.h_et
             shift = 1e-13 * max(float(np.max(np.abs(np.diag(schur)))), 1e-300)
             self.schur = la.cho_factor(schur + shift * np.eye(schur.shape[0]), lower=True)
@@ -339,95 +305,77 @@ class _Newton:
         return dx - self.h_et @ dnu, dnu
 
 
-def _longest(v: NDArray[np.float64], dv: NDArray[np.float64]) -> float:
-    """The largest α with v + α dv ≥ 0 (v ≥ 0)."""
-    neg = dv < 0.0
-    return float(np.min(-v[neg] / dv[neg], initial=np.inf))
-
-
 def _iterate(pr: _Problem, tolerance: float, max_iterations: int) -> JointSolution:
-    """Mehrotra's predictor-corrector from :class:`_State`'s start."""
-    from ._kernels import gram_add, mirror
+    """Mehrotra's predictor-corrector from :class:`_State`'s start (the loops compiled:
+    :mod:`nearopt.timing._joint_kernels`)."""
+    from . import _joint_kernels as kernels
 
-    st = _State(pr)
+    st, w = _State(pr), _Work(pr)
+    csr = (pr.mat.indptr, pr.mat.indices, pr.mat.data)
+    sides = (st.s_hi, st.s_lo, st.y_hi, st.y_lo)
+    finite = (pr.fin_lo, pr.fin_hi)
+    energy = (pr.t_count, pr.t_scale, pr.u0, pr.t_weight, pr.t_seg, pr.ds, pr.z_scale)
     for iteration in range(1, max_iterations + 1):
-        newton = np.zeros((pr.nx, pr.nx))
-        f, grad, curvature = pr.derivatives(st.x, newton)
-        ax = pr.mat @ st.x
-        r_hi = np.where(pr.fin_hi, ax + st.s_hi - pr.hi, 0.0)
-        r_lo = np.where(pr.fin_lo, st.s_lo - ax + pr.lo, 0.0)
-        r_e = pr.e_mat @ st.x - pr.e_rhs
-        r_d = grad + pr.mat_t @ (st.y_hi - st.y_lo) + pr.e_mat.T @ st.nu
-        gap = float(st.s_hi @ st.y_hi + st.s_lo @ st.y_lo)
-        worst = max(np.max(np.abs(r_hi)), np.max(np.abs(r_lo)), np.max(np.abs(r_e), initial=0.0))
-        if not (np.isfinite(f) and np.isfinite(gap) and np.all(np.isfinite(r_d))):
+        f, gap, worst, rd_max = kernels.assemble(
+            st.x, st.nu, *sides, *csr, pr.lo, pr.hi, *finite, pr.e_dense, pr.e_rhs,
+            *energy, pr.f_scale, pr.nz, w.newton, w.grad, w.r_hi, w.r_lo, w.r_e, w.r_d,
+        )  # fmt: skip
+        if not (np.isfinite(f) and np.isfinite(gap) and np.isfinite(rd_max)):
             return _answer(pr, st, False, iteration, "the iterate is not finite")
-        if gap <= tolerance and worst <= tolerance and np.max(np.abs(r_d)) <= tolerance:
+        if gap <= tolerance and worst <= tolerance and rd_max <= tolerance:
             return _answer(pr, st, True, iteration - 1, f"converged in {iteration - 1} iterations")
-        d = st.y_hi / st.s_hi + st.y_lo / st.s_lo
-        d[: curvature.size] += curvature
-        gram_add(pr.mat.indptr, pr.mat.indices, pr.mat.data, d, newton)
-        mirror(newton)
         try:
-            system = _Newton(newton, pr.e_mat)
+            system = _Newton(w.newton, pr.e_dense)
         except la.LinAlgError:
             return _answer(pr, st, False, iteration, "the Newton matrix is singular")
-        residuals = (r_hi, r_lo, r_e, r_d)
+        np.multiply(st.s_hi, st.y_hi, out=w.rc_hi)  # the predictor: targets s y → 0
+        np.multiply(st.s_lo, st.y_lo, out=w.rc_lo)
+        _, _, longest, halving = _direction(pr, st, w, system, w.affine)
+        a_aff = min(1.0, longest, halving)
         mu = gap / pr.sides
-        aff = _direction(pr, st, system, residuals, st.s_hi * st.y_hi, st.s_lo * st.y_lo)
-        a_aff = _step_length(pr, st, aff, 1.0)
-        mu_aff = (
-            (st.s_hi + a_aff * aff[2]) @ (st.y_hi + a_aff * aff[4])
-            + (st.s_lo + a_aff * aff[3]) @ (st.y_lo + a_aff * aff[5])
-        ) / pr.sides
-        target = (mu_aff / mu) ** 3 * mu
-        rc_hi = np.where(pr.fin_hi, st.s_hi * st.y_hi + aff[2] * aff[4] - target, 0.0)
-        rc_lo = np.where(pr.fin_lo, st.s_lo * st.y_lo + aff[3] * aff[5] - target, 0.0)
-        step = _direction(pr, st, system, residuals, rc_hi, rc_lo)
-        alpha = _step_length(pr, st, step, STEP_TO_BOUNDARY)
-        st.x = st.x + alpha * step[0]
-        st.nu = st.nu + alpha * step[1]
-        st.s_hi = np.where(pr.fin_hi, st.s_hi + alpha * step[2], 1.0)
-        st.s_lo = np.where(pr.fin_lo, st.s_lo + alpha * step[3], 1.0)
-        st.y_hi = np.where(pr.fin_hi, st.y_hi + alpha * step[4], 0.0)
-        st.y_lo = np.where(pr.fin_lo, st.y_lo + alpha * step[5], 0.0)
+        mu_aff = kernels.gap_after(a_aff, *sides, *w.affine) / pr.sides
+        kernels.corrector_targets(
+            *sides, *w.affine, *finite, (mu_aff / mu) ** 3 * mu, w.rc_hi, w.rc_lo
+        )
+        dx, dnu, longest, halving = _direction(pr, st, w, system, w.step)
+        alpha = min(1.0, STEP_TO_BOUNDARY * longest, halving)
+        st.x += alpha * dx
+        st.nu += alpha * dnu
+        for v, dv in zip(sides, w.step, strict=True):  # (Δs_hi, Δs_lo, Δy_hi, Δy_lo)
+            v += alpha * dv
     return _answer(pr, st, False, max_iterations, f"no convergence in {max_iterations} iterations")
 
 
 def _direction(
-    pr: _Problem,
-    st: _State,
-    system: _Newton,
-    residuals: tuple[NDArray[np.float64], ...],
-    rc_hi: NDArray[np.float64],
-    rc_lo: NDArray[np.float64],
-) -> tuple[NDArray[np.float64], ...]:
-    """The Newton direction (Δx, Δν, Δs_hi, Δs_lo, Δy_hi, Δy_lo) for the complementarity
-    targets s·y − rc."""
-    r_hi, r_lo, r_e, r_d = residuals
-    w_hi = np.where(pr.fin_hi, (rc_hi - st.y_hi * r_hi) / st.s_hi, 0.0)
-    w_lo = np.where(pr.fin_lo, (rc_lo - st.y_lo * r_lo) / st.s_lo, 0.0)
-    dx, dnu = system.solve(-r_d + pr.mat_t @ (w_hi - w_lo), r_e)
-    a_dx = pr.mat @ dx
-    ds_hi, ds_lo = -r_hi - a_dx, -r_lo + a_dx
-    dy_hi = np.where(pr.fin_hi, (-rc_hi - st.y_hi * ds_hi) / st.s_hi, 0.0)
-    dy_lo = np.where(pr.fin_lo, (-rc_lo - st.y_lo * ds_lo) / st.s_lo, 0.0)
-    return dx, dnu, ds_hi, ds_lo, dy_hi, dy_lo
+    pr: _Problem, st: _State, w: _Work, system: _Newton, out: list[NDArray[np.float64]]
+) -> tuple[NDArray[np.float64], NDArray[np.float64], float, float]:
+    """Δx, Δν (and Δs_hi, Δs_lo, Δy_hi, Δy_lo into ``out``) for the complementarity targets
+    s y − rc in ``w``; the longest step to the slacks' and multipliers' boundary and the
+    longest that no more than halves any z."""
+    from . import _joint_kernels as kernels
+
+    csr = (pr.mat.indptr, pr.mat.indices, pr.mat.data)
+    sides = (st.s_hi, st.s_lo, st.y_hi, st.y_lo)
+    residuals = (w.r_hi, w.r_lo, pr.fin_lo, pr.fin_hi)
+    kernels.newton_rhs(w.rc_hi, w.rc_lo, *sides, *residuals, w.r_d, *csr, w.rhs)
+    dx, dnu = system.solve(w.rhs, w.r_e)
+    targets = (w.rc_hi, w.rc_lo, *sides, *residuals)
+    longest, halving = kernels.directions(dx, *targets, *csr, st.x, pr.nz, *out)
+    return dx, dnu, longest, halving
 
 
-def _step_length(
-    pr: _Problem, st: _State, step: tuple[NDArray[np.float64], ...], fraction: float
-) -> float:
-    """At most 1, ``fraction`` of the way to the nearest slack's or multiplier's boundary, and
-    no b more than halved."""
-    hi, lo = pr.fin_hi, pr.fin_lo
-    longest = min(
-        _longest(st.s_hi[hi], step[2][hi]),
-        _longest(st.s_lo[lo], step[3][lo]),
-        _longest(st.y_hi[hi], step[4][hi]),
-        _longest(st.y_lo[lo], step[5][lo]),
-    )
-    return min(1.0, fraction * longest, _longest(st.x[: pr.nz], 2.0 * step[0][: pr.nz]))
+class _Work:
+    """The arrays one iteration fills: the Newton matrix, ∇F, the residuals, the right-hand
+    side, the complementarity targets and the directions (Δs_hi, Δs_lo, Δy_hi, Δy_lo) of the
+    predictor and of the step."""
+
+    def __init__(self, pr: _Problem) -> None:
+        nx, m = pr.nx, pr.lo.size
+        self.newton, self.grad, self.r_d, self.rhs = np.empty((nx, nx)), *np.empty((3, nx))
+        self.r_hi, self.r_lo, self.rc_hi, self.rc_lo = np.empty((4, m))
+        self.r_e = np.empty(pr.e_rhs.size)
+        self.affine = list(np.empty((4, m)))
+        self.step = list(np.empty((4, m)))
 
 
 def _answer(

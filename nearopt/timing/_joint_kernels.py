@@ -1,0 +1,242 @@
+"""The compiled loops of :mod:`nearopt.timing.joint` (numba): one Newton iteration's residuals,
+Newton matrix and directions, over the rows of a CSR matrix (columns sorted in each row).
+
+The rows are a_r x ∈ [lo_r, hi_r]; a side is open where ``fin_lo`` / ``fin_hi`` is false (its
+slack 1 and multiplier 0 then, never changed). The first ``t_count`` rows are the torque rows of
+the energy term (u_r = t_scale_r · a_r x + u0_r). x = (z / z_scale, p / p_scale); knot k + 1 of
+the grid is z index k. Compiled on first use and cached beside this file, as
+:mod:`nearopt.timing._kernels`.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ._kernels import cached_jit, inline_jit
+
+
+@inline_jit(error_model="numpy")
+def _lambdas(x, z_scale, nz):  # pragma: no cover - compiled
+    """λ = √b at the free knots and its first two derivatives in x."""
+    lam = np.empty(nz)
+    dl = np.empty(nz)
+    d2l = np.empty(nz)
+    for j in range(nz):
+        b = max(x[j] * z_scale[j], 0.0)
+        lam[j] = np.sqrt(b)
+        if lam[j] > 0.0:
+            dl[j] = 0.5 * z_scale[j] / lam[j]
+            d2l[j] = -0.25 * z_scale[j] * z_scale[j] / (lam[j] * lam[j] * lam[j])
+        else:
+            dl[j] = 0.0
+            d2l[j] = 0.0
+    return lam, dl, d2l
+
+
+@inline_jit(error_model="numpy")
+def _row_values(indptr, indices, data, x):  # pragma: no cover - compiled
+    m = indptr.size - 1
+    ax = np.zeros(m)
+    for r in range(m):
+        acc = 0.0
+        for a in range(indptr[r], indptr[r + 1]):
+            acc += data[a] * x[indices[a]]
+        ax[r] = acc
+    return ax
+
+
+@inline_jit(error_model="numpy")
+def _add_cross(newton, c, j, value):  # pragma: no cover - compiled
+    """value at (c, j) and (j, c) of a symmetric matrix held in its lower triangle."""
+    if c > j:
+        newton[c, j] += value
+    elif c < j:
+        newton[j, c] += value
+    else:
+        newton[c, c] += 2.0 * value
+
+
+@cached_jit(error_model="numpy")
+def assemble(
+    x, nu, s_hi, s_lo, y_hi, y_lo,
+    indptr, indices, data, lo, hi, fin_lo, fin_hi,
+    e_mat, e_rhs,
+    t_count, t_scale, u0, t_weight, t_seg, ds, z_scale, f_scale, nz,
+    newton, grad, r_hi, r_lo, r_e, r_d,
+):  # fmt: skip  # pragma: no cover - compiled
+    """F, the residuals (into r_hi, r_lo, r_e, r_d), ∇F (into grad) and the Newton matrix
+    ∇²F + Σ_r (y/s)_r a_r a_rᵀ (into ``newton``, zeroed here, both triangles); returns
+    (F, Σ s y, the largest row residual, the largest |r_d|)."""
+    big_n = ds.size
+    nx = x.size
+    m = indptr.size - 1
+    ax = _row_values(indptr, indices, data, x)
+    lam, dl, d2l = _lambdas(x, z_scale, nz)
+    y = np.empty(big_n)
+    for k in range(big_n):
+        y[k] = (lam[k - 1] if k >= 1 else 0.0) + (lam[k] if k < nz else 0.0)
+    q = np.zeros(big_n)
+    u = np.empty(t_count)
+    for r in range(t_count):
+        u[r] = t_scale[r] * ax[r] + u0[r]
+        q[t_seg[r]] += 0.5 * t_weight[r] * u[r] * u[r]
+    g = np.empty(big_n)
+    f = 0.0
+    for k in range(big_n):
+        g[k] = f_scale * 2.0 * ds[k] * (1.0 + q[k]) / y[k]
+        f += g[k]
+    newton[:, :] = 0.0
+    grad[:] = 0.0
+    for j in range(nz):  # ∂g/∂y and ∂²g/∂y² along λ of the two segments at knot j + 1
+        gy = -g[j] / y[j] - g[j + 1] / y[j + 1]
+        gyy0, gyy1 = 2.0 * g[j] / y[j] ** 2, 2.0 * g[j + 1] / y[j + 1] ** 2
+        grad[j] = gy * dl[j]
+        newton[j, j] += (gyy0 + gyy1) * dl[j] * dl[j] + gy * d2l[j]
+        if j + 1 < nz:
+            newton[j + 1, j] += gyy1 * dl[j] * dl[j + 1]
+    d = np.empty(m)
+    for r in range(m):
+        d[r] = (y_hi[r] / s_hi[r] if fin_hi[r] else 0.0) + (y_lo[r] / s_lo[r] if fin_lo[r] else 0.0)
+    for r in range(t_count):  # the energy: ∂g/∂u, ∂²g/∂u², ∂²g/∂u∂y along the torque rows
+        k = t_seg[r]
+        curvature = 2.0 * f_scale * ds[k] * t_weight[r] / y[k]
+        slope = curvature * u[r]
+        d[r] += curvature * t_scale[r] * t_scale[r]
+        mixed = -slope / y[k] * t_scale[r]
+        for a in range(indptr[r], indptr[r + 1]):
+            c = indices[a]
+            grad[c] += slope * t_scale[r] * data[a]
+            if k >= 1:
+                _add_cross(newton, c, k - 1, mixed * data[a] * dl[k - 1])
+            if k < nz:
+                _add_cross(newton, c, k, mixed * data[a] * dl[k])
+    _gram(indptr, indices, data, d, newton)
+    for i in range(nx):
+        for j in range(i):
+            newton[j, i] = newton[i, j]
+    return _residuals(
+        x, nu, s_hi, s_lo, y_hi, y_lo, indptr, indices, data, ax, lo, hi, fin_lo, fin_hi,
+        e_mat, e_rhs, grad, r_hi, r_lo, r_e, r_d, f,
+    )  # fmt: skip
+
+
+@inline_jit(error_model="numpy")
+def _gram(indptr, indices, data, d, out):  # pragma: no cover - compiled
+    for r in range(indptr.size - 1):
+        dr = d[r]
+        if dr == 0.0:
+            continue
+        first, end = indptr[r], indptr[r + 1]
+        for a in range(first, end):
+            va = dr * data[a]
+            ia = indices[a]
+            for b in range(first, a + 1):
+                out[ia, indices[b]] += va * data[b]
+
+
+@inline_jit(error_model="numpy")
+def _residuals(
+    x, nu, s_hi, s_lo, y_hi, y_lo, indptr, indices, data, ax, lo, hi, fin_lo, fin_hi,
+    e_mat, e_rhs, grad, r_hi, r_lo, r_e, r_d, f,
+):  # fmt: skip  # pragma: no cover - compiled
+    m = indptr.size - 1
+    gap = 0.0
+    worst = 0.0
+    r_d[:] = grad
+    for r in range(m):
+        r_hi[r] = ax[r] + s_hi[r] - hi[r] if fin_hi[r] else 0.0
+        r_lo[r] = s_lo[r] - ax[r] + lo[r] if fin_lo[r] else 0.0
+        worst = max(worst, abs(r_hi[r]), abs(r_lo[r]))
+        gap += s_hi[r] * y_hi[r] + s_lo[r] * y_lo[r]
+        dual = y_hi[r] - y_lo[r]
+        if dual != 0.0:
+            for a in range(indptr[r], indptr[r + 1]):
+                r_d[indices[a]] += dual * data[a]
+    for e in range(e_rhs.size):
+        acc = -e_rhs[e]
+        for c in range(x.size):
+            acc += e_mat[e, c] * x[c]
+            r_d[c] += e_mat[e, c] * nu[e]
+        r_e[e] = acc
+        worst = max(worst, abs(acc))
+    rd_max = 0.0
+    for c in range(x.size):
+        rd_max = max(rd_max, abs(r_d[c]))
+    return f, gap, worst, rd_max
+
+
+@cached_jit(error_model="numpy")
+def newton_rhs(
+    rc_hi, rc_lo, s_hi, s_lo, y_hi, y_lo, r_hi, r_lo, fin_lo, fin_hi, r_d,
+    indptr, indices, data, out,
+):  # fmt: skip  # pragma: no cover - compiled
+    """−r_d + Aᵀ(w_hi − w_lo), w = (rc − y r)/s on the finite sides: the right-hand side of
+    the Newton system for the complementarity targets s y − rc."""
+    out[:] = -r_d
+    for r in range(indptr.size - 1):
+        w = (rc_hi[r] - y_hi[r] * r_hi[r]) / s_hi[r] if fin_hi[r] else 0.0
+        if fin_lo[r]:
+            w -= (rc_lo[r] - y_lo[r] * r_lo[r]) / s_lo[r]
+        if w != 0.0:
+            for a in range(indptr[r], indptr[r + 1]):
+                out[indices[a]] += w * data[a]
+
+
+@cached_jit(error_model="numpy")
+def directions(
+    dx, rc_hi, rc_lo, s_hi, s_lo, y_hi, y_lo, r_hi, r_lo, fin_lo, fin_hi,
+    indptr, indices, data, x, nz, ds_hi, ds_lo, dy_hi, dy_lo,
+):  # fmt: skip  # pragma: no cover - compiled
+    """Δs and Δy from Δx (into ds_*, dy_*); returns the largest step to the boundary of the
+    slacks and multipliers and the largest that leaves every z at least half of itself."""
+    longest = np.inf
+    for r in range(indptr.size - 1):
+        a_dx = 0.0
+        for a in range(indptr[r], indptr[r + 1]):
+            a_dx += data[a] * dx[indices[a]]
+        if fin_hi[r]:
+            ds_hi[r] = -r_hi[r] - a_dx
+            dy_hi[r] = (-rc_hi[r] - y_hi[r] * ds_hi[r]) / s_hi[r]
+            longest = _towards(longest, s_hi[r], ds_hi[r])
+            longest = _towards(longest, y_hi[r], dy_hi[r])
+        else:
+            ds_hi[r], dy_hi[r] = 0.0, 0.0
+        if fin_lo[r]:
+            ds_lo[r] = -r_lo[r] + a_dx
+            dy_lo[r] = (-rc_lo[r] - y_lo[r] * ds_lo[r]) / s_lo[r]
+            longest = _towards(longest, s_lo[r], ds_lo[r])
+            longest = _towards(longest, y_lo[r], dy_lo[r])
+        else:
+            ds_lo[r], dy_lo[r] = 0.0, 0.0
+    halving = np.inf
+    for j in range(nz):
+        halving = _towards(halving, x[j], 2.0 * dx[j])
+    return longest, halving
+
+
+@inline_jit()
+def _towards(longest, v, dv):  # pragma: no cover - compiled
+    """The smaller of ``longest`` and the step at which v + α dv reaches 0 (v ≥ 0)."""
+    if dv < 0.0:
+        return min(longest, -v / dv)
+    return longest
+
+
+@cached_jit(error_model="numpy")
+def gap_after(alpha, s_hi, s_lo, y_hi, y_lo, ds_hi, ds_lo, dy_hi, dy_lo):  # pragma: no cover
+    """Σ s y after a step α."""
+    total = 0.0
+    for r in range(s_hi.size):
+        total += (s_hi[r] + alpha * ds_hi[r]) * (y_hi[r] + alpha * dy_hi[r])
+        total += (s_lo[r] + alpha * ds_lo[r]) * (y_lo[r] + alpha * dy_lo[r])
+    return total
+
+
+@cached_jit(error_model="numpy")
+def corrector_targets(
+    s_hi, s_lo, y_hi, y_lo, ds_hi, ds_lo, dy_hi, dy_lo, fin_lo, fin_hi, target, rc_hi, rc_lo
+):  # pragma: no cover - compiled
+    """Mehrotra's targets s y + Δs_aff Δy_aff − σμ on the finite sides (into rc_*)."""
+    for r in range(s_hi.size):
+        rc_hi[r] = s_hi[r] * y_hi[r] + ds_hi[r] * dy_hi[r] - target if fin_hi[r] else 0.0
+        rc_lo[r] = s_lo[r] * y_lo[r] + ds_lo[r] * dy_lo[r] - target if fin_lo[r] else 0.0
