@@ -986,3 +986,49 @@ def _extremes(cl, cr, off, xs, ys, count):  # pragma: no cover - compiled
         hi = max(hi, value)
         low = min(low, value)
     return hi, low
+
+
+@cached_jit(error_model="numpy")
+def envelope_crossing(g, w, d, kg, kw, kd, seg, at, joint, sign, limit):  # pragma: no cover
+    """The smallest t = √α > 0 at which one of the sixteen sums of an interval (those of
+    :func:`nearopt.timing.between._envelope_crossing`, formed here for G, W and D from their
+    values and second differences κ) reaches its limit: sign · (G + W t² + D t − limit) = 0;
+    inf where none does, −1 where one is above it already at t = 0 (or at it and rising). The
+    intervals are (seg, at, joint) [segment, interval, joint]. The same arithmetic as
+    :func:`nearopt.timing.between._first_crossing` on those sums."""
+    best = np.inf
+    for e in range(seg.size):
+        k, j, i = seg[e], at[e], joint[e]
+        cg = kg[k, j + 1, i] - kg[k, j, i]
+        cw = kw[k, j + 1, i] - kw[k, j, i]
+        cd = kd[k, j + 1, i] - kd[k, j, i]
+        for side in range(2):
+            for end in range(2):
+                for s in (1.0, -1.0):
+                    for t in (1.0, -1.0):
+                        gs = g[k, j + side, i] + s * kg[k, j + end, i] / 8.0 + t * cg / 8.0
+                        ws = w[k, j + side, i] + s * kw[k, j + end, i] / 8.0 + t * cw / 8.0
+                        ds = d[k, j + side, i] + s * kd[k, j + end, i] / 8.0 + t * cd / 8.0
+                        root = _crossing(sign * ws, sign * ds, sign * (gs - limit[i]))
+                        if root < 0.0:
+                            return -1.0
+                        best = min(best, root)
+    return best
+
+
+@inline_jit(error_model="numpy")
+def _crossing(w, d, c):  # pragma: no cover - compiled
+    """The first t > 0 with c + d t + w t² = 0 (inf if none); −1 if c > 0, or c = 0 and the
+    sum rises from there."""
+    if c > 0.0 or (c == 0.0 and (d > 0.0 or (d == 0.0 and w > 0.0))):
+        return -1.0
+    if w == 0.0:
+        return -c / d if d > 0.0 else np.inf
+    disc = d * d - 4.0 * w * c
+    root = np.sqrt(max(disc, 0.0))
+    q = -0.5 * (d + (root if d >= 0.0 else -root))
+    best = np.inf
+    for t in (q / w, c / q):
+        if np.isfinite(t) and t > 0.0 and disc >= 0.0:
+            best = min(best, t)
+    return best

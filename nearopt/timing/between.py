@@ -160,7 +160,7 @@ class BetweenSamples:
         Since q(αb) = g + α(m a + c b) + √α dλ, a uniform α restores the limits at the cost of a
         relative slow-down of the order of the bulge. The bound of :meth:`excess` on an interval
         between points (see the class) holds if and only if each of its sixteen sums
-        (:func:`_envelope_sums`) does; each is G + W α + D √α, so α is the smallest first
+        (:func:`_envelope_crossing`) does; each is G + W α + D √α, so α is the smallest first
         crossing of a limit by one of these, found in closed form.
         """
         return self.largest_alpha(b) * b
@@ -179,11 +179,7 @@ class BetweenSamples:
                 # with damping (+ D √α) it may leave it in between: then every interval counts
                 over = finite & (damped | (sign * bound > sign * limit))
                 if np.any(over):
-                    g, w, d = _envelope_sums(terms, over)
-                    joint = np.nonzero(over)[2]
-                    alpha = min(
-                        alpha, _first_crossing(sign * w, sign * d, sign * (g - limit[joint]))
-                    )
+                    alpha = min(alpha, _envelope_crossing(terms, over, sign, limit))
                 g, w, d = (x[:, finite] for x in near)
                 alpha = min(alpha, _first_crossing(sign * w, sign * d, sign * (g - limit[finite])))
         return alpha
@@ -304,28 +300,22 @@ def _largest_product(
     return np.where(inside, np.maximum(ends, peak), ends)
 
 
-def _envelope_sums(
-    terms: list[NDArray[np.float64]], where: NDArray[np.bool_]
-) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-    """For G, W, D along the segments, (N, P + 2, n) each: the sixteen sums
-    q_i ± κ_l / 8 ± (κ_{j+1} − κ_j) / 8 of every interval j (i, l ∈ {j, j + 1}, κ the second
-    differences of :func:`_curvature`) where ``where`` ((N, P + 1, n)) is true, in the order of
-    ``np.nonzero(where)`` (16 rows each), for G, W and D: the bound of
-    :meth:`BetweenSamples._envelope` lies within a limit if and only if all of them do."""
-    seg, j, joint = np.nonzero(where)
-    out = []
-    for v in terms:
-        curvature = _curvature(v)
-        change = curvature[seg, j + 1, joint] - curvature[seg, j, joint]
-        sums = [
-            v[seg, j + i, joint] + s * curvature[seg, j + at, joint] / 8.0 + t * change / 8.0
-            for i in (0, 1)
-            for at in (0, 1)
-            for s in (1.0, -1.0)
-            for t in (1.0, -1.0)
-        ]
-        out.append(np.stack(sums))
-    return out[0], out[1], out[2]
+def _envelope_crossing(
+    terms: list[NDArray[np.float64]], where: NDArray[np.bool_], sign: float, limit: NDArray
+) -> float:
+    """The largest α ∈ [0, 1] with every one of the sixteen sums q_i ± κ_l / 8 ± (κ_{j+1} −
+    κ_j) / 8 of every interval j between points where ``where`` ((N, P + 1, n)) holds (i, l ∈
+    {j, j + 1}, κ the second differences of :func:`_curvature`) within its limit for all
+    α' ≤ α, each sum formed for G, W and D of ``terms`` ((N, P + 2, n) each) and taken as
+    sign · (G + W α + D √α − limit) ≤ 0: the bound of :meth:`BetweenSamples._envelope` lies
+    within a limit if and only if all of them do. :func:`_first_crossing`'s arithmetic,
+    compiled (:func:`~nearopt.timing._kernels.envelope_crossing`; the sums are not stored)."""
+    from ._kernels import envelope_crossing
+
+    seg, at, joint = np.nonzero(where)
+    curvatures = [_curvature(v) for v in terms]
+    t = envelope_crossing(*terms, *curvatures, seg, at, joint, float(sign), limit)
+    return 0.0 if t < 0.0 else float(min(1.0, t**2))
 
 
 def _first_crossing(
