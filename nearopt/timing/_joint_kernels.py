@@ -61,7 +61,7 @@ def assemble(
     x, nu, s_hi, s_lo, y_hi, y_lo,
     indptr, indices, data, lo, hi, fin_lo, fin_hi,
     e_mat, e_rhs,
-    t_count, t_scale, u0, t_weight, t_seg, ds, z_scale, f_scale, nz,
+    t_count, t_scale, u0, t_weight, t_seg, ds, z_scale, f_scale, nz, group_start, group_rows,
     newton, grad, r_hi, r_lo, r_e, r_d,
 ):  # fmt: skip  # pragma: no cover - compiled
     """F, the residuals (into r_hi, r_lo, r_e, r_d), ∇F (into grad) and the Newton matrix
@@ -110,7 +110,7 @@ def assemble(
                 _add_cross(newton, c, k - 1, mixed * data[a] * dl[k - 1])
             if k < nz:
                 _add_cross(newton, c, k, mixed * data[a] * dl[k])
-    _gram(indptr, indices, data, d, newton)
+    _gram(indptr, indices, data, d, group_start, group_rows, newton)
     for i in range(nx):
         for j in range(i):
             newton[j, i] = newton[i, j]
@@ -121,17 +121,75 @@ def assemble(
 
 
 @inline_jit(error_model="numpy")
-def _gram(indptr, indices, data, d, out):  # pragma: no cover - compiled
-    for r in range(indptr.size - 1):
-        dr = d[r]
-        if dr == 0.0:
+def _gram(indptr, indices, data, d, group_start, group_rows, out):  # pragma: no cover
+    """out += Σ_r d_r a_r a_rᵀ in the lower triangle, the rows taken in groups (rows of a group
+    share most of their columns: their sum is formed densely on the union of their columns,
+    then added once)."""
+    nx = out.shape[0]
+    local = np.full(nx, -1)  # a column's place in the group's union
+    columns = np.empty(nx, dtype=np.int64)
+    widest = 1
+    for g in range(group_start.size - 1):
+        widest = max(widest, group_start[g + 1] - group_start[g])
+    dense = np.zeros((widest, nx))
+    block = np.zeros((nx, nx))
+    for g in range(group_start.size - 1):
+        first, end = group_start[g], group_start[g + 1]
+        if end - first == 1:
+            _gram_row(indptr, indices, data, d, group_rows[first], out)
             continue
-        first, end = indptr[r], indptr[r + 1]
-        for a in range(first, end):
-            va = dr * data[a]
-            ia = indices[a]
-            for b in range(first, a + 1):
-                out[ia, indices[b]] += va * data[b]
+        count = 0
+        for e in range(first, end):
+            r = group_rows[e]
+            for a in range(indptr[r], indptr[r + 1]):
+                if local[indices[a]] < 0:
+                    local[indices[a]] = count
+                    columns[count] = indices[a]
+                    count += 1
+        for e in range(end - first):
+            dense[e, :count] = 0.0
+            r = group_rows[first + e]
+            for a in range(indptr[r], indptr[r + 1]):
+                dense[e, local[indices[a]]] = data[a]
+        for a in range(count):
+            block[a, : a + 1] = 0.0
+        for e in range(end - first):
+            dr = d[group_rows[first + e]]
+            if dr != 0.0:
+                _rank_one(block, dense[e], dr, count)
+        for a in range(count):
+            ca = columns[a]
+            for b in range(a + 1):
+                cb = columns[b]
+                if cb <= ca:
+                    out[ca, cb] += block[a, b]
+                else:
+                    out[cb, ca] += block[a, b]
+        for a in range(count):
+            local[columns[a]] = -1
+
+
+@cached_jit(error_model="numpy", fastmath=True)
+def _rank_one(block, row, weight, count):  # pragma: no cover - compiled
+    """block += weight · row rowᵀ in its lower triangle (the first ``count`` entries)."""
+    for a in range(count):
+        va = weight * row[a]
+        if va != 0.0:
+            for b in range(a + 1):
+                block[a, b] += va * row[b]
+
+
+@inline_jit(error_model="numpy")
+def _gram_row(indptr, indices, data, d, r, out):  # pragma: no cover - compiled
+    dr = d[r]
+    if dr == 0.0:
+        return
+    first, end = indptr[r], indptr[r + 1]
+    for a in range(first, end):
+        va = dr * data[a]
+        ia = indices[a]
+        for b in range(first, a + 1):
+            out[ia, indices[b]] += va * data[b]
 
 
 @inline_jit(error_model="numpy")

@@ -160,7 +160,9 @@ class _Problem:
         self.p_scale = np.where(np.isfinite(reach) & (reach > 0.0), reach, 1.0)
         columns = sp.diags(np.concatenate([self.z_scale, self.p_scale]))
         self.nx = self.nz + self.p_scale.size
-        t_rows, t_lo, t_hi, t_scale = _torque_block(weights, torque, torque_limits, columns)
+        t_rows, t_lo, t_hi, t_scale, t_index = _torque_block(
+            weights, torque, torque_limits, columns
+        )
         self.energy = bool(np.any(weights > 0.0))
         if self.energy:  # the torque rows of the energy term: u = scale · (a x) + u0
             n2 = t_scale.size
@@ -173,6 +175,13 @@ class _Problem:
         m_rows, m_lo, m_hi, self.e_mat, self.e_rhs = _linear_block(rows, columns)
         z_hi = np.where(np.isfinite(z_upper), z_upper / self.z_scale, np.inf)
         self.mat = sp.vstack([t_rows, m_rows, sp.eye(self.nx, format="csr")]).tocsr()
+        # the torque rows of one sample (its n joints) share their columns: summed as a group
+        order = np.argsort(t_index % (2 * big_n), kind="stable")
+        sample = (t_index % (2 * big_n))[order]
+        starts = np.flatnonzero(np.r_[True, sample[1:] != sample[:-1]])
+        rest = np.arange(t_index.size, self.mat.shape[0])
+        self.group_rows = np.r_[order, rest].astype(np.int64)
+        self.group_start = np.r_[starts, t_index.size + np.arange(rest.size + 1)].astype(np.int64)
         self.mat.sort_indices()
         self.top = self.mat[: self.t_count]  # the energy's torque rows
         self.e_dense = np.ascontiguousarray(self.e_mat.toarray())
@@ -224,9 +233,9 @@ def _torque_block(
     torque: tuple[sp.spmatrix, NDArray[np.float64]],
     limits: tuple[NDArray[np.float64], NDArray[np.float64]],
     columns: sp.spmatrix,
-) -> tuple[sp.csr_matrix, NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+) -> tuple[sp.csr_matrix, NDArray, NDArray, NDArray, NDArray[np.int64]]:
     """The torque rows (all of them with an energy term, else those with a limit), divided by
-    their limits, and their sides; the divisors."""
+    their limits, and their sides; the divisors; their indices among the torque samples."""
     t_mat, u0 = sp.csr_matrix(torque[0]), np.asarray(torque[1], dtype=float)
     low, high = limits
     held = np.isfinite(low) | np.isfinite(high)
@@ -238,7 +247,7 @@ def _torque_block(
     )
     scale = np.where(scale > 0.0, scale, 1.0)
     rows = sp.diags(1.0 / scale) @ t_mat[index] @ columns
-    return sp.csr_matrix(rows), (low - u0) / scale, (high - u0) / scale, scale
+    return sp.csr_matrix(rows), (low - u0) / scale, (high - u0) / scale, scale, index
 
 
 def _linear_block(
@@ -318,7 +327,8 @@ def _iterate(pr: _Problem, tolerance: float, max_iterations: int) -> JointSoluti
     for iteration in range(1, max_iterations + 1):
         f, gap, worst, rd_max = kernels.assemble(
             st.x, st.nu, *sides, *csr, pr.lo, pr.hi, *finite, pr.e_dense, pr.e_rhs,
-            *energy, pr.f_scale, pr.nz, w.newton, w.grad, w.r_hi, w.r_lo, w.r_e, w.r_d,
+            *energy, pr.f_scale, pr.nz, pr.group_start, pr.group_rows,
+            w.newton, w.grad, w.r_hi, w.r_lo, w.r_e, w.r_d,
         )  # fmt: skip
         if not (np.isfinite(f) and np.isfinite(gap) and np.isfinite(rd_max)):
             return _answer(pr, st, False, iteration, "the iterate is not finite")
