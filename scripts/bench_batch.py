@@ -6,7 +6,10 @@ process pool with 1 and 2 workers, and on a dask.distributed scheduler with two 
 workers started here on 127.0.0.1. Printed: wall time, motions per minute, speed-up against one
 worker; and the overhead per task of each pool (no-op tasks round-tripped).
 
-    python scripts/bench_batch.py [--motions 30]
+With ``--baseline REV`` the same table is first planned by an earlier commit (its ``nearopt/``
+from git archive, run by this script in a child process) and the rates compared.
+
+    python scripts/bench_batch.py [--motions 30] [--baseline 5c1e9b0]
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from benchlib import head, run_with, unpack
 
 import nearopt
 from nearopt.batch import LocalPool, MotionRequest, run_batch
@@ -62,8 +66,30 @@ def overhead(submit_all: object, tasks: int = 400) -> float:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--motions", type=int, default=30)
+    parser.add_argument(
+        "--baseline", help="an earlier commit, run first (the same table) and compared"
+    )
     args = parser.parse_args()
-    requests = table(args.motions)
+    if args.baseline:
+        with tempfile.TemporaryDirectory() as tmp:
+            before = run_with(
+                unpack(args.baseline, Path(tmp)), __file__, "--motions", str(args.motions)
+            )
+        print(f"{args.baseline}:\n{before}\nthis checkout ({head()}):")
+    rates = measure(args.motions)
+    if args.baseline:
+        print("\nmotions/min against " + args.baseline + ":")
+        for line in before.splitlines():
+            label = line[:26].strip()
+            if label in rates:
+                old = float(line.split()[-3])
+                print(f"  {label:24} {old:8.1f} → {rates[label]:8.1f}  ({rates[label] / old:.2f}×)")
+
+
+def measure(count: int) -> dict[str, float]:
+    """The table planned on each pool (printed); motions/min by pool."""
+    rates: dict[str, float] = {}
+    requests = table(count)
     print(f"{len(requests)} motions (two_link, ur5, panda; planner defaults, verified)")
     print(f"{'pool':26} {'wall [s]':>9} {'motions/min':>12} {'speed-up':>9} {'failed':>7}")
     rows = []
@@ -75,6 +101,7 @@ def main() -> None:
             wall = time.perf_counter() - t0
         base = base or wall
         rows.append((f"local, {workers} worker(s)", wall, result.failed))
+        rates[rows[-1][0]] = 60 * len(requests) / wall
         print(
             f"{rows[-1][0]:26} {wall:9.1f} {60 * len(requests) / wall:12.1f} "
             f"{base / wall:9.2f} {result.failed:7d}",
@@ -126,6 +153,7 @@ def main() -> None:
             t0 = time.perf_counter()
             result = run_batch(requests, out, client)
             wall = time.perf_counter() - t0
+        rates["dask, 2 workers"] = 60 * len(requests) / wall
         print(
             f"{'dask, 2 workers':26} {wall:9.1f} {60 * len(requests) / wall:12.1f} "
             f"{base / wall:9.2f} {result.failed:7d}",
@@ -146,6 +174,7 @@ def main() -> None:
         f"\noverhead per task (no-op tasks, 2 workers): dask {dask_overhead * 1e3:.2f} ms, "
         f"local process pool {local_overhead * 1e3:.2f} ms"
     )
+    return rates
 
 
 if __name__ == "__main__":
