@@ -155,7 +155,7 @@ def sequential_convex(
         if run.out_of_time():
             reason, message = StopReason.TIME_LIMIT, "the time limit was reached"
             break
-        disc = Discretisation(timing.problem)
+        disc = Discretisation.of(timing.problem)
         z = timing.b[1:-1]
         if basis is None:  # the grid (knots, interior points) is the same for every iterate
             basis = path_basis(timing.trajectory.path, disc, end=goal is not None)

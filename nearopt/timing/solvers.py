@@ -139,7 +139,7 @@ def solve_timing(
     """
     deadline = time.perf_counter() + time_limit
     check_gravity(problem)
-    disc = Discretisation(problem)
+    disc = Discretisation.of(problem)
     if guess is not None:
         guess = np.asarray(guess, dtype=float)
         if guess.shape != problem.sigma.shape:
