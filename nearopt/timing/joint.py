@@ -158,7 +158,7 @@ class _Problem:
         self.z_scale = np.maximum(start, 1e-9 * max(float(np.max(start, initial=0.0)), 1e-300))
         reach = np.maximum(np.abs(p_bounds[0]), np.abs(p_bounds[1]))
         self.p_scale = np.where(np.isfinite(reach) & (reach > 0.0), reach, 1.0)
-        columns = sp.diags(np.concatenate([self.z_scale, self.p_scale]))
+        columns = np.concatenate([self.z_scale, self.p_scale])
         self.nx = self.nz + self.p_scale.size
         t_rows, t_lo, t_hi, t_scale, t_index = _torque_block(
             weights, torque, torque_limits, columns
@@ -221,18 +221,27 @@ def _row_scale(
         np.where(np.isfinite(lower), np.abs(lower), 0.0),
     )
     if mat.nnz:
-        largest = np.zeros(scale.size)
-        coo = mat.tocoo()
-        np.maximum.at(largest, coo.row, np.abs(coo.data))
+        first = np.minimum(mat.indptr[:-1], mat.nnz - 1)
+        largest = np.maximum.reduceat(np.abs(mat.data), first)
+        largest = np.where(np.diff(mat.indptr) > 0, largest, 0.0)
         scale = np.where(scale > 0.0, scale, largest)
     return np.where(scale > 0.0, scale, 1.0)
+
+
+def _scaled(
+    mat: sp.csr_matrix, rows: NDArray[np.float64], columns: NDArray[np.float64]
+) -> sp.csr_matrix:
+    """diag(rows) · mat · diag(columns), entry by entry as the two products give it."""
+    mat = sp.csr_matrix(mat)
+    data = (np.repeat(rows, np.diff(mat.indptr)) * mat.data) * columns[mat.indices]
+    return sp.csr_matrix((data, mat.indices, mat.indptr), shape=mat.shape)
 
 
 def _torque_block(
     weights: NDArray[np.float64],
     torque: tuple[sp.spmatrix, NDArray[np.float64]],
     limits: tuple[NDArray[np.float64], NDArray[np.float64]],
-    columns: sp.spmatrix,
+    columns: NDArray[np.float64],
 ) -> tuple[sp.csr_matrix, NDArray, NDArray, NDArray, NDArray[np.int64]]:
     """The torque rows (all of them with an energy term, else those with a limit), divided by
     their limits, and their sides; the divisors; their indices among the torque samples."""
@@ -246,12 +255,12 @@ def _torque_block(
         np.where(np.isfinite(low), np.abs(low), 0.0),
     )
     scale = np.where(scale > 0.0, scale, 1.0)
-    rows = sp.diags(1.0 / scale) @ t_mat[index] @ columns
-    return sp.csr_matrix(rows), (low - u0) / scale, (high - u0) / scale, scale, index
+    rows = _scaled(t_mat[index], 1.0 / scale, columns)
+    return rows, (low - u0) / scale, (high - u0) / scale, scale, index
 
 
 def _linear_block(
-    rows: LinearRows, columns: sp.spmatrix
+    rows: LinearRows, columns: NDArray[np.float64]
 ) -> tuple[sp.csr_matrix, NDArray[np.float64], NDArray[np.float64], sp.csr_matrix, NDArray]:
     """The rows with a finite side, divided by their scale, and their sides; the equality rows
     (lower = upper) and their right-hand side."""
@@ -259,11 +268,11 @@ def _linear_block(
     lower, upper = np.asarray(rows.lower, dtype=float), np.asarray(rows.upper, dtype=float)
     equal = np.isfinite(lower) & (lower == upper)
     keep = np.flatnonzero(~equal & (np.isfinite(lower) | np.isfinite(upper)))
-    e_mat = sp.csr_matrix(mat[np.flatnonzero(equal)] @ columns)
+    e_mat = _scaled(mat[np.flatnonzero(equal)], np.ones(int(equal.sum())), columns)
     kept, lower, upper = mat[keep], lower[keep], upper[keep]
     scale = _row_scale(kept, lower, upper)
     return (
-        sp.csr_matrix(sp.diags(1.0 / scale) @ kept @ columns),
+        _scaled(kept, 1.0 / scale, columns),
         lower / scale,
         upper / scale,
         e_mat,
