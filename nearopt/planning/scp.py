@@ -642,30 +642,13 @@ def _solve_model(
     model's own timing z, by Clarabel where that does not converge."""
     bounds = (np.maximum(-radius, lower - p), np.minimum(radius, upper - p))
     rows = LinearRows(model.matrix, model.lower, model.upper)
-    torque = (model.torque, model.torque_const)
-    joint = solve_joint(
-        disc.ds,
-        weights,
-        rows,
-        torque,
-        disc.z_upper,
-        p_bounds=bounds,
-        torque_limits=model.torque_limits,
-        start=z,
-    )
+    problem = (disc.ds, weights, rows, (model.torque, model.torque_const), disc.z_upper)
+    limits = {"p_bounds": bounds, "torque_limits": model.torque_limits}
+    joint = solve_joint(*problem, **limits, start=z)
     if joint.converged:
         return np.clip(joint.p, *bounds), joint.objective, joint.z
     for tolerance in (1e-8, 1e-7, 1e-6):
-        sol = solve_conic(
-            disc.ds,
-            weights,
-            rows,
-            torque,
-            disc.z_upper,
-            p_bounds=bounds,
-            torque_limits=model.torque_limits,
-            tolerance=tolerance,
-        )
+        sol = solve_conic(*problem, **limits, tolerance=tolerance)
         if is_solved(sol.status):
             return np.clip(sol.p, *bounds), sol.objective, sol.z
     return None

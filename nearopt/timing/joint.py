@@ -51,16 +51,11 @@ START_SLACK = 1e-2  # the least slack of a row at the start (rows are of size 1)
 
 
 class JointSolution(NamedTuple):
-    """The joint solver's answer.
+    """The joint solver's answer: z, p and objective as in
+    :class:`~nearopt.timing.ConicSolution` (the objective is F at (z, p)), and
 
     Attributes
     ----------
-    z
-        b at the free knots, shape (N−1,) (clipped at 0).
-    p
-        The further variables, shape (P,).
-    objective
-        F at (z, p): the discretised cost of the model [s, or the cost's unit].
     converged
         Whether the stopping test passed within the iteration limit.
     iterations
@@ -94,22 +89,10 @@ def solve_joint(
 
     Parameters
     ----------
-    ds
-        Δσ_k of the N segments, shape (N,).
-    weights
-        w_i of the cost, shape (n,) (all 0: time-optimal).
-    rows
-        ``lower ≤ M (z, p) ≤ upper``, M of shape (R, N − 1 + P); rows with lower = upper are
-        kept as equalities.
-    torque
-        (T, u0): the torque samples u = T (z, p) + u0, joint-major (row i·2N + r as in
-        :class:`~nearopt.timing.Discretisation`), T of shape (n·2N, N − 1 + P).
-    z_upper
-        Upper bounds on z (inf where none), shape (N − 1,); z ≥ 0 always.
-    p_bounds
-        Lower and upper bounds on p, each (P,), finite (a trust region).
-    torque_limits
-        Lower and upper limits of the torque samples, each (n·2N,) (±inf where none).
+    ds, weights, rows, torque, z_upper, p_bounds, torque_limits
+        As in :func:`~nearopt.timing.solve_conic`, but: rows with lower = upper are kept as
+        equalities, p_bounds are finite (a trust region) and torque_limits are always given
+        (±inf where a sample has none).
     start
         b at the free knots where the model was built, shape (N − 1,) (positive): the scale of z
         and its start.
@@ -118,7 +101,7 @@ def solve_joint(
     max_iterations
         Newton iterations before giving up (``converged`` False).
     """
-    problem = _Problem(ds, weights, rows, torque, z_upper, p_bounds, torque_limits, start)
+    problem = _Problem((ds, weights, rows, torque, z_upper), p_bounds, torque_limits, start)
     with _one_blas_thread():
         return _iterate(problem, tolerance, max_iterations)
 
@@ -144,15 +127,13 @@ class _Problem:
 
     def __init__(
         self,
-        ds: NDArray[np.float64],
-        weights: NDArray[np.float64],
-        rows: LinearRows,
-        torque: tuple[sp.spmatrix, NDArray[np.float64]],
-        z_upper: NDArray[np.float64],
+        model: tuple,
         p_bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
         torque_limits: tuple[NDArray[np.float64], NDArray[np.float64]],
         start: NDArray[np.float64],
     ) -> None:
+        """``model``: (ds, weights, rows, torque, z_upper) of :func:`solve_joint`."""
+        ds, weights, rows, torque, z_upper = model
         big_n = ds.size
         self.ds, self.nz, self.big_n = ds, big_n - 1, big_n
         self.z_scale = np.maximum(start, 1e-9 * max(float(np.max(start, initial=0.0)), 1e-300))
