@@ -387,13 +387,16 @@ class CollisionModel:
             req.gjk_convergence_criterion_type = coal.GJKConvergenceCriterionType.Absolute
             req.gjk_tolerance = 1e-10
             req.epa_tolerance = 1e-10
+        # the results' Python handles, taken once: they refer to the results coal fills at
+        # every query (taking them anew from the vector costs as much as the query itself)
+        self._results = list(self._gdata.distanceResults)
 
     def _all(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         if not self.geometry.collisionPairs:
             return np.zeros(0)
         t0 = time.perf_counter()
         pin.computeDistances(self.robot.model, self._data, self.geometry, self._gdata, q)
-        d = np.array([r.min_distance for r in self._gdata.distanceResults])
+        d = np.array([r.min_distance for r in self._results])
         self.seconds += time.perf_counter() - t0
         return d
 
