@@ -232,7 +232,7 @@ class CollisionModel:
         if d.size == 0:
             return Contact(Pair("", ""), np.inf, np.full((2, 3), np.nan))
         k = int(np.argmin(d))
-        r = self._gdata.distanceResults[k]
+        r = self._results[k]
         return Contact(
             self.pairs[k], float(d[k]), np.array([r.getNearestPoint1(), r.getNearestPoint2()]), k
         )
@@ -278,7 +278,7 @@ class CollisionModel:
         if index.size == 0:
             return d[index], grads
         pin.computeJointJacobians(model, data, q)
-        results = [self._gdata.distanceResults[int(k)] for k in index]
+        results = [self._results[int(k)] for k in index]
         normal = np.array([r.normal for r in results])  # (m, 3), from the first to the second
         frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         for side, sign in ((0, -1.0), (1, 1.0)):
@@ -331,7 +331,7 @@ class CollisionModel:
 
         def contact(k: int, d: float, at: NDArray[np.float64]) -> Contact:
             self._all(at)
-            r = self._gdata.distanceResults[int(k)]
+            r = self._results[int(k)]
             return Contact(
                 self.pairs[k], d, np.array([r.getNearestPoint1(), r.getNearestPoint2()]), int(k)
             )
