@@ -153,7 +153,7 @@ class _Problem:
         else:
             self.t_count, self.t_scale, self.u0 = 0, np.zeros(0), np.zeros(0)
             self.t_weight, self.t_seg = np.zeros(0), np.zeros(0, dtype=np.int64)
-        m_rows, m_lo, m_hi, self.e_mat, self.e_rhs = _linear_block(rows, columns)
+        m_rows, m_lo, m_hi, e_mat, self.e_rhs = _linear_block(rows, columns)
         z_hi = np.where(np.isfinite(z_upper), z_upper / self.z_scale, np.inf)
         self.mat = sp.vstack([t_rows, m_rows, sp.eye(self.nx, format="csr")]).tocsr()
         # the torque rows of one sample (its n joints) share their columns: summed as a group
@@ -165,32 +165,27 @@ class _Problem:
         self.group_start = np.r_[starts, t_index.size + np.arange(rest.size + 1)].astype(np.int64)
         self.mat.sort_indices()
         self.top = self.mat[: self.t_count]  # the energy's torque rows
-        self.e_dense = np.ascontiguousarray(self.e_mat.toarray())
+        self.e_dense = np.ascontiguousarray(e_mat.toarray())
         lo = np.concatenate([t_lo, m_lo, np.zeros(self.nz), p_bounds[0] / self.p_scale])
         hi = np.concatenate([t_hi, m_hi, z_hi, p_bounds[1] / self.p_scale])
         self.fin_lo, self.fin_hi = np.isfinite(lo), np.isfinite(hi)
         self.lo, self.hi = np.where(self.fin_lo, lo, 0.0), np.where(self.fin_hi, hi, 0.0)
         self.sides = int(self.fin_lo.sum() + self.fin_hi.sum())
-        self.f_scale = 1.0
-        self.f_scale = 1.0 / self.value(self._start())
+        self.f_scale = 1.0 / self.cost(self.start())
 
-    def _start(self) -> NDArray[np.float64]:
+    def start(self) -> NDArray[np.float64]:
+        """x at the start: z at the model's timing, p = 0."""
         return np.concatenate([np.ones(self.nz), np.zeros(self.nx - self.nz)])
 
-    def _segments(self, x: NDArray[np.float64]) -> tuple[NDArray[np.float64], ...]:
-        """λ at the free knots, y_k, g_k = 2Δσ_k (1 + Q_k)/y_k and the torques u (energy)."""
+    def cost(self, x: NDArray[np.float64]) -> float:
+        """F at x = Σ_k 2Δσ_k (1 + Q_k) / (λ_k + λ_{k+1}) (not scaled)."""
         lam = np.sqrt(np.maximum(x[: self.nz] * self.z_scale, 0.0))
         y = np.concatenate([lam, [0.0]]) + np.concatenate([[0.0], lam])
         q = np.zeros(self.big_n)
-        u = np.zeros(0)
         if self.energy:
             u = self.t_scale * (self.top @ x) + self.u0
             q = np.bincount(self.t_seg, 0.5 * self.t_weight * u * u, self.big_n)
-        return lam, y, 2.0 * self.ds * (1.0 + q) / y, u
-
-    def value(self, x: NDArray[np.float64]) -> float:
-        """F(x), scaled."""
-        return float(np.sum(self._segments(x)[2])) * self.f_scale
+        return float(np.sum(2.0 * self.ds * (1.0 + q) / y))
 
 
 def _row_scale(
@@ -266,7 +261,7 @@ class _State:
     its upper and lower sides (1 and 0 where a side is open)."""
 
     def __init__(self, pr: _Problem) -> None:
-        self.x = pr._start()
+        self.x = pr.start()
         self.nu = np.zeros(pr.e_rhs.size)
         ax = pr.mat @ self.x
         self.s_hi = np.where(pr.fin_hi, np.maximum(pr.hi - ax, START_SLACK), 1.0)
@@ -384,7 +379,7 @@ def _answer(
     return JointSolution(
         z=np.maximum(st.x[: pr.nz] * pr.z_scale, 0.0),
         p=st.x[pr.nz :] * pr.p_scale,
-        objective=pr.value(st.x) / pr.f_scale,
+        objective=pr.cost(st.x),
         converged=converged,
         iterations=iterations,
         message=message,
