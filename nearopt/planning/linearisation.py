@@ -61,7 +61,11 @@ def path_basis(path: BSplinePath, disc: Discretisation, end: bool = False) -> Pa
 
 
 def row_path_jacobian(
-    robot: Robot, disc: Discretisation, z: NDArray[np.float64], basis: PathBasis
+    robot: Robot,
+    disc: Discretisation,
+    z: NDArray[np.float64],
+    basis: PathBasis,
+    between: bool = True,
 ) -> sp.csr_matrix:
     """∂(rows)/∂p at the timing z: sparse, (R, K·n), columns j·n + i.
 
@@ -75,6 +79,9 @@ def row_path_jacobian(
         b at the free knots, shape (N−1,).
     basis
         The control points' basis where the rows lie (:func:`path_basis`).
+    between
+        Whether the rows between the samples get their derivatives; False: they are left
+        empty (zero rows in their places), for a model that does not hold them (stage 2's).
     """
     p = disc.problem
     n, big_n = p.dof, p.segments
@@ -126,6 +133,10 @@ def row_path_jacobian(
         k, w = inside.segment[point], inside.weight[point]
         b_at = (1.0 - w) * b[k] + w * b[k + 1]
         joint_rows(rows, 2.0 * b_at * inside.dtheta[point, joint], basis.interior[point])
+    tail = disc.blocks.torque_between.start  # the rows between the samples come last
+    if not between and disc.blocks.speed_between.stop in (tail, disc.offset.size):
+        parts.append(sp.csr_matrix((disc.offset.size - tail, k_count * n)))
+        return _stacked(parts)
     # the rows between the samples: interpolated between the segment's two ends (their own
     # curvature terms, second differences along the segment, are left out: O(Δσ²) smaller)
     rows = disc.blocks.torque_between
@@ -149,6 +160,11 @@ def row_path_jacobian(
         ((1.0 - w) * 2.0 * b[k] * p.dtheta[k, joint])[:, None] * basis.knots[1][k]
         + (w * 2.0 * b[k + 1] * p.dtheta[k + 1, joint])[:, None] * basis.knots[1][k + 1],
     )
+    return _stacked(parts)
+
+
+def _stacked(parts: list[sp.spmatrix]) -> sp.csr_matrix:
+    """The parts one under the other, without the zeros of the basis functions' supports."""
     out = sp.vstack(parts).tocsr()
     out.eliminate_zeros()
     return out

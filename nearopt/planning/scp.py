@@ -328,7 +328,7 @@ def _iterate_model(
     the path, the clearances, the via-points kept (B(σ_v) Δp = 0 per joint) and θe kept on the
     pose (J_task Δθe = 0)."""
     n = robot.n
-    model = _model(disc, z, row_path_jacobian(robot, disc, z, basis), reach)
+    model = _model(disc, z, row_path_jacobian(robot, disc, z, basis, between=False), reach)
     if collisions is not None:
         model = _with_rows(
             model, *collision_rows(collisions, path, reach[:n], end=goal is not None)
