@@ -133,9 +133,9 @@ def row_path_jacobian(
         k, w = inside.segment[point], inside.weight[point]
         b_at = (1.0 - w) * b[k] + w * b[k + 1]
         joint_rows(rows, 2.0 * b_at * inside.dtheta[point, joint], basis.interior[point])
-    tail = disc.blocks.torque_between.start  # the rows between the samples come last
-    if not between and disc.blocks.speed_between.stop in (tail, disc.offset.size):
-        parts.append(sp.csr_matrix((disc.offset.size - tail, k_count * n)))
+    if not between:  # the rows between the samples are the last ones (Discretisation)
+        tail = disc.offset.size - disc.blocks.torque_between.start
+        parts.append(sp.csr_matrix((tail, k_count * n)))
         return _stacked(parts)
     # the rows between the samples: interpolated between the segment's two ends (their own
     # curvature terms, second differences along the segment, are left out: O(Δσ²) smaller)

@@ -192,16 +192,21 @@ def _row_scale(
     mat: sp.csr_matrix, lower: NDArray[np.float64], upper: NDArray[np.float64]
 ) -> NDArray[np.float64]:
     """Each row's largest finite limit (its largest coefficient where that is 0; else 1)."""
-    scale = np.maximum(
-        np.where(np.isfinite(upper), np.abs(upper), 0.0),
-        np.where(np.isfinite(lower), np.abs(lower), 0.0),
-    )
+    scale = _largest_limit(lower, upper)
     if mat.nnz:
         first = np.minimum(mat.indptr[:-1], mat.nnz - 1)
         largest = np.maximum.reduceat(np.abs(mat.data), first)
         largest = np.where(np.diff(mat.indptr) > 0, largest, 0.0)
         scale = np.where(scale > 0.0, scale, largest)
     return np.where(scale > 0.0, scale, 1.0)
+
+
+def _largest_limit(lower: NDArray[np.float64], upper: NDArray[np.float64]) -> NDArray[np.float64]:
+    """The larger of |lower| and |upper| where finite (0 where neither is)."""
+    return np.maximum(
+        np.where(np.isfinite(upper), np.abs(upper), 0.0),
+        np.where(np.isfinite(lower), np.abs(lower), 0.0),
+    )
 
 
 def _scaled(
@@ -226,10 +231,7 @@ def _torque_block(
     held = np.isfinite(low) | np.isfinite(high)
     index = np.arange(u0.size) if np.any(weights > 0.0) else np.flatnonzero(held)
     low, high, u0 = low[index], high[index], u0[index]
-    scale = np.maximum(
-        np.where(np.isfinite(high), np.abs(high), 0.0),
-        np.where(np.isfinite(low), np.abs(low), 0.0),
-    )
+    scale = _largest_limit(low, high)
     scale = np.where(scale > 0.0, scale, 1.0)
     rows = _scaled(t_mat[index], 1.0 / scale, columns)
     return rows, (low - u0) / scale, (high - u0) / scale, scale, index
@@ -242,18 +244,12 @@ def _linear_block(
     (lower = upper) and their right-hand side."""
     mat = sp.csr_matrix(rows.matrix)
     lower, upper = np.asarray(rows.lower, dtype=float), np.asarray(rows.upper, dtype=float)
-    equal = np.isfinite(lower) & (lower == upper)
-    keep = np.flatnonzero(~equal & (np.isfinite(lower) | np.isfinite(upper)))
-    e_mat = _scaled(mat[np.flatnonzero(equal)], np.ones(int(equal.sum())), columns)
+    equal = np.flatnonzero(np.isfinite(lower) & (lower == upper))
+    e_mat, e_rhs = _scaled(mat[equal], np.ones(equal.size), columns), upper[equal]
+    keep = np.flatnonzero((lower != upper) & (np.isfinite(lower) | np.isfinite(upper)))
     kept, lower, upper = mat[keep], lower[keep], upper[keep]
     scale = _row_scale(kept, lower, upper)
-    return (
-        _scaled(kept, 1.0 / scale, columns),
-        lower / scale,
-        upper / scale,
-        e_mat,
-        upper[:0] if not equal.any() else np.asarray(rows.upper, dtype=float)[equal],
-    )
+    return _scaled(kept, 1.0 / scale, columns), lower / scale, upper / scale, e_mat, e_rhs
 
 
 class _State:
