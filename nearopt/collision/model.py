@@ -347,26 +347,47 @@ class CollisionModel:
         speeds = slope(s[:-1], s[1:])  # (S−1, n)
         bound = speeds @ rate.T * np.diff(s)[:, None]  # (S−1, P)
         open_ = np.argwhere(dist[:-1] + dist[1:] - 2.0 * level < bound)
-        stack = [(s[i], s[i + 1], dist[i, k], dist[i + 1, k], int(k)) for i, k in open_]
+        # the open intervals, bisected level by level: each level's midpoints evaluated
+        # together (the path in one call, the kinematics once per distinct midpoint, shared by
+        # the pairs open there); every interval is bisected exactly as it would be alone
+        i, k = open_.T if open_.size else (np.zeros(0, dtype=int), np.zeros(0, dtype=int))
+        a, b, da, db, k = s[i], s[i + 1], dist[i, k], dist[i + 1, k], k.astype(int)
         model, data, geom, gdata = self.robot.model, self._data, self.geometry, self._gdata
-        while stack:
-            a, b, da, db, k = stack.pop()
-            if checks > max_checks or b - a < 1e-9 * s_end:
-                return Clearance(False, level, contact(k, min(da, db), path([a])[0]), a, checks)
+        while a.size:
+            short = np.flatnonzero(b - a < 1e-9 * s_end)
+            if checks > max_checks or short.size:
+                j = int(short[0]) if short.size else 0
+                at = float(a[j])
+                return Clearance(
+                    False, level, contact(k[j], min(da[j], db[j]), path([at])[0]), at, checks
+                )
             m = 0.5 * (a + b)
-            qm = path([m])[0]
-            pin.forwardKinematics(model, data, qm)
-            pin.updateGeometryPlacements(model, data, geom, gdata)
-            dm = pin.computeDistance(geom, gdata, int(k)).min_distance
-            checks += 1
-            if dm < worst[0]:
-                worst = (dm, m, k)
-            if dm < level:
-                return Clearance(False, level, contact(k, dm, qm), m, checks)
-            for lo, hi, dl, dh in ((a, m, da, dm), (m, b, dm, db)):
-                v = slope(np.array([lo]), np.array([hi]))[0] @ rate[k] * (hi - lo)
-                if dl + dh - 2.0 * level < v:
-                    stack.append((lo, hi, dl, dh, k))
+            points, where = np.unique(m, return_inverse=True)
+            qm = path(points)
+            dm = np.empty(m.size)
+            order = np.argsort(where, kind="stable")
+            bounds = np.searchsorted(where[order], np.arange(points.size + 1))
+            for u in range(points.size):
+                pin.forwardKinematics(model, data, qm[u])
+                pin.updateGeometryPlacements(model, data, geom, gdata)
+                for j in order[bounds[u] : bounds[u + 1]]:
+                    dm[j] = pin.computeDistance(geom, gdata, int(k[j])).min_distance
+            checks += m.size
+            j = int(np.argmin(dm))
+            if dm[j] < worst[0]:
+                worst = (float(dm[j]), float(m[j]), int(k[j]))
+            close = np.flatnonzero(dm < level)
+            if close.size:
+                j = int(close[0])
+                return Clearance(
+                    False, level, contact(k[j], dm[j], qm[where[j]]), float(m[j]), checks
+                )
+            halves = (a, m, da, dm), (m, b, dm, db)
+            lo, hi, dl, dh = (np.concatenate(pair) for pair in zip(*halves, strict=True))
+            kk = np.concatenate([k, k])
+            v = np.einsum("ij,ij->i", slope(lo, hi), rate[kk]) * (hi - lo)
+            keep = dl + dh - 2.0 * level < v
+            a, b, da, db, k = lo[keep], hi[keep], dl[keep], dh[keep], kk[keep]
         return Clearance(
             True, level, contact(worst[2], worst[0], path([worst[1]])[0]), worst[1], checks
         )
@@ -478,9 +499,9 @@ def _slope_bound(path: JointPath):  # noqa: ANN202
     def bound(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
         first = np.clip(np.searchsorted(edges, a, side="right") - 1, 0, lo.size - 1)
         last = np.clip(np.searchsorted(edges, b, side="left") - 1, 0, lo.size - 1)
-        out = np.empty((np.size(a), piece.shape[1]))
-        for i, (f, l_) in enumerate(zip(first, last, strict=True)):
-            out[i] = piece[f : l_ + 1].max(axis=0)
+        out = piece[first]  # an interval within one piece: that piece's bound
+        for i in np.flatnonzero(last > first):
+            out[i] = piece[first[i] : last[i] + 1].max(axis=0)
         return out
 
     return bound
