@@ -15,10 +15,12 @@ linearised torques (a Gauss-Newton model in the path, exact in the timing). A sp
 b θ'_i² ≤ v_i² enters as b ≤ v_i²/θ'_i² with that bound's tangent in θ' (convex, so the tangent
 is conservative). Per-joint speed rows make two joints reaching their limits together a corner of
 the convex model, not a kink of a gradient. A trust region on the change of θ' (|Δp_{j,i}| ≤
-ρ·s_i/(K − 1), s_i the joint's scale) and the position limits on the control points (which keep
-the whole curve within them, convex-hull property) bound the step. The new path is re-timed
-exactly by stage 1 and accepted if its J is lower; ρ grows after steps that did as well as the
-model predicted and shrinks after poor or rejected ones. Every accepted iterate is therefore a
+ρ_j·s_i/(K − 1) for control point j, s_i the joint's scale) and the position limits on the
+control points (which keep the whole curve within them, convex-hull property) bound the step.
+The new path is re-timed exactly by stage 1 and accepted if its J is lower; after a step that did
+as well as the model predicted, ρ_j doubles for the control points whose step reached it (a
+bend that needs room gets it without letting the rest of the path swing), and all shrink after
+poor or rejected steps. Every accepted iterate is therefore a
 path from θ0 to θe timed optimally by stage 1: feasible, at rest at both ends.
 
 The convex model is solved by nearopt's own interior-point method with a dense Newton system in
@@ -149,7 +151,8 @@ def sequential_convex(
     evaluations, index, small, failures = 1, 0, 0, 0
     run.report(0, timing, None, start)
     basis = None
-    radius = options.trust_radius
+    moving = p.size // n  # the interior control points, and θe with a goal pose
+    radius = np.full(moving, options.trust_radius)  # per control point (see _new_radius)
     reason, message = StopReason.ITERATION_LIMIT, f"{run.max_iterations} iterations"
     while index < run.max_iterations:
         if run.out_of_time():
@@ -159,15 +162,16 @@ def sequential_convex(
         z = timing.b[1:-1]
         if basis is None:  # the grid (knots, interior points) is the same for every iterate
             basis = path_basis(timing.trajectory.path, disc, end=goal is not None)
+        bound = np.repeat(radius, n) * scale
         model = _iterate_model(
-            robot, disc, z, basis, p, path_of(p), radius * scale, collisions, start, via, goal
+            robot, disc, z, basis, p, path_of(p), bound, collisions, start, via, goal
         )
         j0 = timing.objective
-        step = _solve_model(disc, weights, model, z, p, radius * scale, lower, upper)
+        step = _solve_model(disc, weights, model, z, p, bound, lower, upper)
         if step is None:  # numerical trouble: a smaller step is a better-conditioned model
             failures += 1
-            radius *= 0.25
-            if failures < 3 and radius >= options.min_trust_radius:
+            radius = 0.25 * radius
+            if failures < 3 and radius.max() >= options.min_trust_radius:
                 continue
             reason, message = StopReason.SOLVER, "the convex model could not be solved"
             break
@@ -188,9 +192,9 @@ def sequential_convex(
         evaluations += timed
         gain = -np.inf if trial is None else j0 - trial.objective
         ratio = gain / (j0 - predicted)
-        reach = float(np.max(np.abs(dp) / scale))  # the step's length, as a fraction of scale
-        boundary = reach > 0.9 * radius
-        radius = _new_radius(radius, gain, ratio, reach, boundary)
+        # the step's length per control point, as a fraction of scale
+        reach = np.max((np.abs(dp) / scale).reshape(moving, n), axis=1)
+        radius = _new_radius(radius, gain, ratio, reach)
         if gain > 0.0:
             p, timing = p_trial, trial
             index += 1
@@ -199,7 +203,7 @@ def sequential_convex(
             if small == 3:
                 reason, message = StopReason.CONVERGED, _J_STOPPED.format(options.tolerance)
                 break
-        if radius < options.min_trust_radius:
+        if radius.max() < options.min_trust_radius:
             reason, message = (
                 StopReason.CONVERGED,
                 _NO_STEP_LOWERS_J.format(options.min_trust_radius),
@@ -258,16 +262,23 @@ def _timer(
     return time_it
 
 
-def _new_radius(radius: float, gain: float, ratio: float, reach: float, boundary: bool) -> float:
-    """The trust region after a step: doubled after one that did as the model predicted at its
-    boundary, cut to half its length after a poor one, to a quarter after a rejected one."""
+def _new_radius(
+    radius: NDArray[np.float64],
+    gain: float,
+    ratio: float,
+    reach: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """The trust region after a step that moved each control point by ``reach`` (fractions of
+    scale): after a step that did as the model predicted, doubled for the control points that
+    reached it (the others did not need more room); after a poor one, cut to half the step's
+    length, after a rejected one to a quarter, for all of them."""
     if gain > 0.0:
-        if ratio > 0.75 and boundary:
-            return radius * 2.0
+        if ratio > 0.75:
+            return np.where(reach > 0.9 * radius, 2.0 * radius, radius)
         if ratio < 0.25:
-            return 0.5 * reach
+            return np.minimum(radius, 0.5 * np.max(reach))
         return radius
-    return 0.25 * reach
+    return np.minimum(radius, 0.25 * np.max(reach))
 
 
 def _trust_scale(
