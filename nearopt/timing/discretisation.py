@@ -444,6 +444,14 @@ class Discretisation:
         big_n = p.segments
         k, w = inside.segment[chosen], inside.weight[chosen]
         lower, upper = safe_limits(quantity)
+        # the segment's margin (that of its samples): where tighten() found the motion leaving
+        # a limit between the samples, the points inside the segment are held within it too
+        margin = np.zeros((k.size, limited.size))
+        if quantity.margin is not None:  # capped as at the samples: b = 0 stays inside
+            g = coef.g[chosen][:, limited]
+            room = np.minimum(upper[limited] - g, g - lower[limited])
+            margin = np.maximum(quantity.margin[k], quantity.margin[big_n + k])[:, limited]
+            margin = np.minimum(margin, np.maximum(0.9 * room, 0.0))
         slope = coef.m[chosen][:, limited] / (2.0 * self.ds[k])[:, None]
         curv = coef.c[chosen][:, limited]
         # √b at a point: exact in the end segments (one knot at rest), else at the nearer knot
@@ -458,8 +466,8 @@ class Discretisation:
             (coef.d[chosen][:, limited] * root[:, None]).T.ravel(),
             np.tile(node, joints),
             coef.g[chosen][:, limited].T.ravel(),
-            np.repeat(lower[limited], count),
-            np.repeat(upper[limited], count),
+            (lower[limited][None, :] + margin).T.ravel(),
+            (upper[limited][None, :] - margin).T.ravel(),
             np.repeat(limited, count),
             np.tile(k, joints),
             np.tile(w, joints),
