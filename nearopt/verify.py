@@ -11,7 +11,7 @@ checked :data:`CHUNK` at a time and a long motion's simulation is bounded by
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator
+from collections.abc import Iterator
 from dataclasses import dataclass
 from operator import attrgetter
 from typing import TYPE_CHECKING, Protocol
@@ -60,6 +60,9 @@ MAX_STEP = 2e-3
 """The forward simulation's longest Runge-Kutta step [s]."""
 MAX_HALVINGS = 6
 """How often the forward simulation of a window halves its step at most."""
+LANES = 32
+"""Windows the forward simulation integrates side by side at most (its memory: their torques at
+every Runge-Kutta stage)."""
 MAX_WINDOWS = 400
 """The forward simulation's windows at most (100 s of motion at the default window): a longer
 motion is simulated on that many windows spread evenly over it, the last one among them."""
@@ -694,73 +697,115 @@ def _simulate(
     results differ by at most 15 × ``accuracy`` (RK4's error is then about ``accuracy``) or
     :data:`MAX_HALVINGS` times. At most :data:`MAX_WINDOWS` windows are simulated, spread evenly
     over the motion with the last one always among them (a bounded cost however long the
-    motion). Returns the simulated end state and the largest window defect.
+    motion). The windows (and the first two step sizes of each) are integrated side by side,
+    one batched ABA per Runge-Kutta stage (:func:`_rk4`). Returns the simulated end state and
+    the largest window defect.
     """
-    model, data = robot.model, robot.new_data()
     te, knots = trajectory.duration, trajectory.t
     largest = min(MAX_STEP, 2.5 / max(_damping_rate(robot, trajectory), 1e-300))
     starts = np.arange(0.0, te, window)
     if starts.size > MAX_WINDOWS:
         starts = starts[np.unique(np.linspace(0, starts.size - 1, MAX_WINDOWS).round().astype(int))]
+    ends = np.minimum(starts + window, te)
+    cuts = [
+        np.concatenate([[w0], knots[(knots > w0) & (knots < w1)], [w1]])
+        for w0, w1 in zip(starts, ends, strict=True)
+    ]
+    first = _states(trajectory, starts)
+    integrate = _Integrator(robot, trajectory, largest)
+    both = integrate([*cuts, *cuts], np.vstack([first, first]), [1] * len(cuts) + [2] * len(cuts))
+    x, finer = both[: len(cuts)], both[len(cuts) :]
+    open_ = np.arange(len(cuts))  # the windows whose last two results still differ
+    for halving in range(1, MAX_HALVINGS + 1):
+        close = np.max(np.abs(finer - x[open_]), axis=1) <= 15.0 * accuracy
+        x[open_] = finer
+        open_ = open_[~close]
+        if not open_.size or halving == MAX_HALVINGS:
+            break
+        finer = integrate([cuts[w] for w in open_], first[open_], [2 ** (halving + 1)] * open_.size)
+    inner = np.flatnonzero(ends < te)
+    defect = float(np.max(np.abs(x[inner] - _states(trajectory, ends[inner])), initial=0.0))
+    return x[-1], defect
 
-    def acceleration(q: NDArray, v: NDArray, u: NDArray) -> NDArray[np.float64]:
-        return pin.aba(model, data, q, v, u - robot.damping * v)
 
-    def state(t: float) -> NDArray[np.float64]:
-        return np.concatenate([x[0] for x in trajectory.states(np.array([t]))[:2]])
-
-    defect, x = 0.0, np.zeros(2 * robot.n)
-    for w0 in starts:
-        w1 = min(w0 + window, te)
-        cuts = np.concatenate([[w0], knots[(knots > w0) & (knots < w1)], [w1]])
-        x = _rk4(acceleration, trajectory, cuts, state(w0), largest, 1)
-        for halving in range(1, MAX_HALVINGS + 1):
-            finer = _rk4(acceleration, trajectory, cuts, state(w0), largest, 2**halving)
-            close = float(np.max(np.abs(finer - x))) <= 15.0 * accuracy
-            x = finer
-            if close:
-                break
-        if w1 < te:
-            defect = max(defect, float(np.max(np.abs(x - state(w1)))))
-    return x, defect
+def _states(trajectory: Motion, t: NDArray[np.float64]) -> NDArray[np.float64]:
+    """x = (θ, θ̇) of the motion at the times t, shape (len(t), 2n)."""
+    if not t.size:
+        return np.zeros((0, 2 * trajectory.states(np.zeros(1))[0].shape[1]))
+    q, qd = trajectory.states(t)[:2]
+    return np.hstack([q, qd])
 
 
-def _rk4(
-    acceleration: Callable[[NDArray, NDArray, NDArray], NDArray[np.float64]],
-    trajectory: Motion,
-    cuts: NDArray[np.float64],
-    x: NDArray[np.float64],
-    step: float,
-    split: int,
-) -> NDArray[np.float64]:
-    """RK4 from the state x = (θ, θ̇) at cuts[0] to cuts[-1] on every piece between cuts (each
-    started and ended just inside, where the torque may jump) in ``split`` times as many equal
-    steps as keep them no longer than ``step`` [s]; the torques at every stage time from one
-    batched call."""
-    n = x.size // 2
-    inside = 1e-12 * np.maximum(1.0, cuts)  # a time just beyond a knot may round onto its other
-    a, b = cuts[:-1] + inside[:-1], cuts[1:] - inside[1:]  # side (a task's parts start late)
-    m = split * np.maximum(1, np.ceil((b - a) / step)).astype(np.int64)
-    h = (b - a) / m
-    nodes = 2 * m + 1  # every step's start, middle and end; a piece's last end is b
-    piece = np.repeat(np.arange(a.size), nodes)
-    first = np.cumsum(nodes) - nodes
-    j = np.arange(piece.size) - np.repeat(first, nodes)
-    u = trajectory.torque(a[piece] + 0.5 * h[piece] * j)
-    q, v = x[:n], x[n:]
-    for p in range(a.size):
-        hs = h[p]
-        for t0 in range(first[p], first[p] + 2 * m[p], 2):
-            k1q, k1v = v, acceleration(q, v, u[t0])
+class _Integrator:
+    """RK4 of several windows side by side (:meth:`__call__`), by Pinocchio's batched ABA."""
+
+    def __init__(self, robot: Robot, trajectory: Motion, step: float) -> None:
+        self.pool = pin.ModelPool(robot.model, 1)
+        self.damping = robot.damping
+        self.trajectory, self.step = trajectory, step
+
+    def acceleration(self, q: NDArray, v: NDArray, u: NDArray) -> NDArray[np.float64]:
+        """θ̈ of every lane, (L, n) in and out."""
+        tau = u - self.damping * v
+        return pin.abaInParallel(1, self.pool, q.T, v.T, tau.T).T
+
+    def __call__(
+        self, cuts: list[NDArray[np.float64]], x: NDArray[np.float64], splits: list[int]
+    ) -> NDArray[np.float64]:
+        """RK4 of every lane from the state x[l] at cuts[l][0] to cuts[l][-1], on every piece
+        between the cuts (each started and ended just inside, where the torque may jump) in
+        ``splits[l]`` times as many equal steps as keep them no longer than the step; the
+        torques at every stage time from one batched call. A lane that has taken all its steps
+        waits with steps of length 0 (which leave its state as it is). At most :data:`LANES`
+        lanes at a time (the torques of every stage of every lane are held together)."""
+        if len(cuts) > LANES:
+            return np.vstack(
+                [
+                    self(cuts[i : i + LANES], x[i : i + LANES], splits[i : i + LANES])
+                    for i in range(0, len(cuts), LANES)
+                ]
+            )
+        n = x.shape[1] // 2
+        times, lengths, firsts = [], [], []
+        offset = 0
+        for c, split in zip(cuts, splits, strict=True):
+            inside = 1e-12 * np.maximum(1.0, c)  # a time just beyond a knot may round onto
+            a, b = c[:-1] + inside[:-1], c[1:] - inside[1:]  # its other side
+            m = split * np.maximum(1, np.ceil((b - a) / self.step)).astype(np.int64)
+            h = (b - a) / m
+            nodes = 2 * m + 1  # every step's start, middle and end; a piece's last end is b
+            piece = np.repeat(np.arange(a.size), nodes)
+            begin = np.cumsum(nodes) - nodes
+            j = np.arange(piece.size) - np.repeat(begin, nodes)
+            times.append(a[piece] + 0.5 * h[piece] * j)
+            lengths.append(np.repeat(h, m))  # every step's length, in order
+            step_index = np.arange(m.sum()) - np.repeat(np.cumsum(m) - m, m)
+            firsts.append(offset + np.repeat(begin, m) + 2 * step_index)
+            offset += piece.size
+        u = self.trajectory.torque(np.concatenate(times))
+        count = max(lv.size for lv in lengths)
+        lanes = len(cuts)
+        h_all = np.zeros((count, lanes))
+        at = np.zeros((count, lanes), dtype=np.int64)
+        for lane, (lv, fv) in enumerate(zip(lengths, firsts, strict=True)):
+            h_all[: lv.size, lane], at[: lv.size, lane] = lv, fv
+            at[lv.size :, lane] = fv[-1]
+        q, v = x[:, :n].copy(), x[:, n:].copy()
+        acc = self.acceleration
+        u0, u1, u2 = u[at], u[at + 1], u[at + 2]  # (steps, lanes, n): a step's three stages
+        h_all = h_all[:, :, None]
+        for k in range(count):
+            hs = h_all[k]
+            k1q, k1v = v, acc(q, v, u0[k])
             k2q = v + 0.5 * hs * k1v
-            k2v = acceleration(q + 0.5 * hs * k1q, k2q, u[t0 + 1])
+            k2v = acc(q + 0.5 * hs * k1q, k2q, u1[k])
             k3q = v + 0.5 * hs * k2v
-            k3v = acceleration(q + 0.5 * hs * k2q, k3q, u[t0 + 1])
+            k3v = acc(q + 0.5 * hs * k2q, k3q, u1[k])
             k4q = v + hs * k3v
-            k4v = acceleration(q + hs * k3q, k4q, u[t0 + 2])
+            k4v = acc(q + hs * k3q, k4q, u2[k])
             q = q + hs / 6.0 * (k1q + 2.0 * k2q + 2.0 * k3q + k4q)
             v = v + hs / 6.0 * (k1v + 2.0 * k2v + 2.0 * k3v + k4v)
-    return np.concatenate([q, v])
+        return np.hstack([q, v])
 
 
 def _damping_rate(robot: Robot, trajectory: Motion) -> float:
