@@ -740,7 +740,7 @@ class _Integrator:
     """RK4 of several windows side by side (:meth:`__call__`), by Pinocchio's batched ABA."""
 
     def __init__(self, robot: Robot, trajectory: Motion, step: float) -> None:
-        self.pool = pin.ModelPool(robot.model, 1)
+        self.pool = robot.new_pool()
         self.damping = robot.damping
         self.trajectory, self.step = trajectory, step
 
