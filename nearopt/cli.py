@@ -31,7 +31,7 @@ from typing import TYPE_CHECKING, NoReturn, TextIO
 from .api import PlanRequest, check, prepare, solve
 from .catalog import available_robots
 from .errors import ConfigurationError, NearoptError, SamplingWarning
-from .export import csv_text, json_text
+from .export import check_record, csv_text, json_text
 from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
 from .path import StraightPath
 from .planning import METHODS, Iteration, PlanResult, StopReason, TaskResult
@@ -384,6 +384,8 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     with interrupt.armed():
         result = solve(prepared, None if quiet else progress, None if quiet else segment_progress)
     _print_summary(result, out)
+    if args.json or args.csv:  # a record too long for its rate is refused before the check
+        check_record(result, args.rate)
     report = check(result, prepared)
     if args.verify:
         print(report, file=out)

@@ -15,12 +15,14 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import SamplingWarning
+from .errors import ConfigurationError, SamplingWarning
 from .outputs import write_atomically
 from .planning import Plan, TaskResult
 from .robot.kinematics import ToolPose
 
 __all__ = [
+    "MAX_VALUES",
+    "check_record",
     "check_sampling",
     "json_text",
     "csv_text",
@@ -30,6 +32,33 @@ __all__ = [
 ]
 
 KEYS = ("q", "qd", "qdd", "tau")
+
+MAX_VALUES = 10_000_000
+"""The most numbers a JSON or CSV record holds (t and θ, θ̇, θ̈, u of every joint per sample):
+about 200 MB of text and 1 GB of memory while it is made. A longer record is refused before
+anything is sampled (:func:`check_record`)."""
+
+
+def check_record(result: Plan, rate: float) -> int:
+    """The number of samples of ``result`` at ``rate`` [Hz]; refused if the record would hold
+    more than :data:`MAX_VALUES` numbers.
+
+    Raises
+    ------
+    ConfigurationError
+        Saying the duration, the samples and the highest rate within the cap.
+    """
+    duration, n = result.duration, result.robot.n
+    samples = int(np.floor(duration * rate + 1e-9)) + 2
+    per_sample = 1 + len(KEYS) * n
+    if samples * per_sample <= MAX_VALUES:
+        return samples
+    highest = (MAX_VALUES // per_sample - 2) / max(duration, 1e-300)
+    raise ConfigurationError(
+        f"the motion lasts {duration:.6g} s: its record at {rate:g} Hz would hold {samples:,} "
+        f"samples of {per_sample} numbers, more than the {MAX_VALUES:,} numbers a JSON or CSV "
+        f"record holds (about 200 MB); ask for a rate of at most {highest:.4g} Hz (--rate)"
+    )
 
 
 def check_sampling(result: Plan, rate: float) -> str | None:
@@ -60,8 +89,10 @@ def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | Non
 
     ``extra`` keys come first (a batch's ``"id"``, ``"request"`` and ``"batch"`` record).
 
-    Warns (:class:`~nearopt.SamplingWarning`) if the rate is too low to resolve the motion.
+    Warns (:class:`~nearopt.SamplingWarning`) if the rate is too low to resolve the motion;
+    refuses a record longer than :data:`MAX_VALUES` numbers (:func:`check_record`).
     """
+    check_record(result, rate)
     check_sampling(result, rate)
     samples = result.trajectory.sample(rate)
     document: dict[str, object] = {
@@ -71,8 +102,7 @@ def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | Non
         "cost": result.cost.describe(),
         "J": result.J,
         "duration": result.duration,
-        "t": samples.t.tolist(),
-        **{key: getattr(samples, key).tolist() for key in KEYS},
+        **{key: _Spliced(key) for key in ("t", *KEYS)},  # the samples: see _dumps
     }
     segments = result.segments if isinstance(result, TaskResult) else None
     if segments is None:
@@ -82,7 +112,7 @@ def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | Non
                 {"t": float(t), "q": q.tolist()}
                 for t, q in zip(result.via_times, result.via, strict=True)
             ]
-        return json.dumps(document)
+        return _dumps(document, samples)
     document["targets"] = [
         {
             "name": target.name,
@@ -111,7 +141,33 @@ def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | Non
             result.trajectory.starts, segments, result.segment_targets, strict=True
         )
     ]
-    return json.dumps(document)
+    return _dumps(document, samples)
+
+
+class _Spliced(str):
+    """The place of a sample array in a document (see :func:`_dumps`)."""
+
+    __slots__ = ()
+
+    def __new__(cls, key: str) -> _Spliced:
+        return super().__new__(cls, f"\x00{key}\x00")
+
+
+def _dumps(document: dict[str, object], samples: object, chunk: int = 65536) -> str:
+    """``json.dumps(document)`` with the sample arrays in the places marked by
+    :class:`_Spliced`, the same text as with their lists in place, made a chunk of samples at a
+    time: the whole record's Python floats never exist at once (a record of
+    :data:`MAX_VALUES` numbers takes ~0.6 GB instead of ~1.4 GB)."""
+    rest = json.dumps(document)
+    pieces: list[str] = []
+    for key in ("t", *KEYS):  # in the document's order
+        head, rest = rest.split(json.dumps(_Spliced(key)), 1)
+        values = getattr(samples, key)
+        chunks = [
+            json.dumps(values[i : i + chunk].tolist())[1:-1] for i in range(0, len(values), chunk)
+        ]
+        pieces += [head, "[", ", ".join(chunks), "]"]
+    return "".join([*pieces, rest])
 
 
 def _pose(goal: object) -> list[float] | None:
@@ -126,8 +182,10 @@ def csv_text(result: Plan, rate: float = 1000.0) -> str:
     a task's has a last column ``segment`` (1, 2, …: the rest-to-rest piece a sample belongs
     to; a sample on a stop belongs to the piece that starts there, the last to the last).
 
-    Warns (:class:`~nearopt.SamplingWarning`) if the rate is too low to resolve the motion.
+    Warns (:class:`~nearopt.SamplingWarning`) if the rate is too low to resolve the motion;
+    refuses a record longer than :data:`MAX_VALUES` numbers (:func:`check_record`).
     """
+    check_record(result, rate)
     check_sampling(result, rate)
     samples = result.trajectory.sample(rate)
     names = result.robot.joint_names

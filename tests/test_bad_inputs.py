@@ -22,7 +22,7 @@ from nearopt import (
     RobotNotFoundError,
     URDFError,
 )
-from nearopt.export import write_json
+from nearopt.export import json_text, write_json
 from nearopt.paper_example import THETA_0, THETA_E
 from nearopt.viz.figures import save_figures
 
@@ -768,6 +768,27 @@ CASES = {
         lambda p: ["--robot", "two_link", *PAPER, "--html", str(p / "missing" / "a.html")],
         ConfigurationError,
         "does not exist",
+    ),
+    "a record too long for its rate (a 2000 s motion at 1 kHz)": Case(
+        lambda p: json_text(
+            nearopt.plan(two_link().with_limits(acceleration=1e-6), (0, 0), (1, 1), grid=20)
+        ),
+        lambda p: [
+            "--robot",
+            "two_link",
+            "--q0",
+            "0",
+            "0",
+            "--qe",
+            "1",
+            "1",
+            "--acceleration-limit",
+            "1e-6",
+            "--json",
+            str(p / "long.json"),
+        ],
+        ConfigurationError,
+        "ask for a rate of at most 555.6 Hz",
     ),
     "--plots is a file": Case(
         lambda p: save_figures(plan(*GOOD), urdf(p, "x", "taken.png")),

@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+import textwrap
 from pathlib import Path
 
 import numpy as np
@@ -325,3 +326,29 @@ def test_shipped_urdfs_plan_from_the_command_line(tmp_path: Path, name: str) -> 
     np.testing.assert_allclose(tau, np.array(doc["tau"]), atol=1e-6 * scale)
     assert worst_torque_excess(robot, tau) <= 1e-6
     assert np.all(np.abs(qd) <= robot.limits.velocity * (1 + 1e-9))
+
+
+def test_a_motion_too_long_to_record_is_refused_in_bounded_memory(tmp_path: Path) -> None:
+    """A 2000 s motion (acceleration limit 1e-6 rad/s²) asked for at 1 kHz: 18 million numbers
+    would be sampled (a 6798 s one took 24 GB before it was killed). The command refuses the
+    record in one line naming the highest rate that fits, writes nothing, and its address
+    space never grows by 2 GB over a process that has loaded nearopt."""
+    script = textwrap.dedent(
+        f"""
+        import os, resource, sys
+        import nearopt.cli
+        used = int(open("/proc/self/statm").read().split()[0]) * os.sysconf("SC_PAGE_SIZE")
+        resource.setrlimit(resource.RLIMIT_AS, (used + 2 * 2**30, resource.RLIM_INFINITY))
+        sys.exit(nearopt.cli.main(["plan", "--robot", "two_link", "--q0", "0", "0", "--qe", "1",
+                                   "1", "--acceleration-limit", "1e-6", "--json",
+                                   {str(tmp_path / "long.json")!r}]))
+        """
+    )
+    done = subprocess.run(
+        [sys.executable, "-c", script], capture_output=True, text=True, timeout=300
+    )
+    assert done.returncode == 2, done.stderr[-2000:]
+    line = done.stderr.strip().splitlines()
+    assert len(line) == 1 and "ask for a rate of at most 555.6 Hz (--rate)" in line[0], line
+    assert "2,000,002 samples" in line[0]
+    assert not (tmp_path / "long.json").exists()
