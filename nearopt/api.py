@@ -26,7 +26,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from .collision import Scene
+from .collision import Mesh, Scene
 from .cost import Cost, TimeCost, TorqueCost
 from .errors import ConfigurationError, SamplingWarning
 from .planning import (
@@ -427,6 +427,24 @@ class Prepared:
     scene: Scene | None
     cost: Cost
     via: list[NDArray[np.float64]]
+
+    def input_files(self) -> dict[str, Path]:
+        """Every file the request reads, by what it is (``"the URDF"``, ``"the scene"``, ``"the
+        mesh of obstacle 'box'"``, …): no output may be one of them
+        (:func:`~nearopt.outputs.refuse_inputs`)."""
+        request = self.request
+        files = {
+            "the URDF": request.urdf,
+            "the SRDF": request.srdf,
+            "the task": request.task,
+            "the scene": request.scene,
+        }
+        out = {what: Path(path) for what, path in files.items() if path is not None}
+        if self.scene is not None:
+            for obstacle in self.scene.obstacles:
+                if isinstance(obstacle.shape, Mesh):
+                    out[f"the mesh of obstacle {obstacle.name!r}"] = Path(obstacle.shape.path)
+        return out
 
 
 @dataclass(frozen=True)

@@ -66,7 +66,7 @@ __all__ = [
 
 SUMMARY_FIELDS = ("id", "status", "J", "te", "iterations", "wall_time", "error")
 """The columns of ``summary.csv``."""
-_ID = re.compile(r"^[A-Za-z0-9][A-Za-z0-9._-]{0,127}$")
+_ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")  # the whole id (fullmatch: no "\n")
 MAX_ATTEMPTS = 3  # a motion whose worker died this many times is recorded as failed
 
 
@@ -86,6 +86,8 @@ class MotionRequest:
 
     id: str
     options: Mapping[str, Any]
+    source: Path | None = field(default=None, compare=False)
+    """The motions file it was read from (:func:`read_requests`), if any."""
 
     @classmethod
     def from_dict(
@@ -102,7 +104,7 @@ class MotionRequest:
         if not isinstance(data, Mapping):
             raise ConfigurationError(f"a motion is a JSON object, got {data!r:.80}")
         motion_id = data.get("id", default_id)
-        if not isinstance(motion_id, str) or not _ID.match(motion_id):
+        if not isinstance(motion_id, str) or not _ID.fullmatch(motion_id):
             raise ConfigurationError(
                 f"motion id {motion_id!r}: ids are 1-128 letters, digits, '.', '_' or '-', "
                 "starting with a letter or digit (they name the output files)"
@@ -512,7 +514,7 @@ def read_requests(path: str | Path) -> list[MotionRequest]:
                 f"{path}, line {number}: id {request.id!r} repeats line {seen[request.id]}"
             )
         seen[request.id] = number
-        requests.append(request)
+        requests.append(replace(request, source=path))
     if not requests:
         raise ConfigurationError(f"{path}: no motions (one JSON object per line)")
     return requests
@@ -631,6 +633,7 @@ def run_batch(
     t0 = time.perf_counter()
     check_rate(rate)
     folder = make_folder(out, "the motions")
+    _refuse_inputs(folder, requests)
     outcomes: dict[str, MotionOutcome] = {}
     for request in requests:
         done = _done(folder, request, retry_failed, rate)
@@ -681,6 +684,34 @@ def run_batch(
 def _light(outcome: MotionOutcome) -> MotionOutcome:
     """The outcome without its document and plan (kept for the summary)."""
     return replace(outcome, document="", result=None)
+
+
+def _refuse_inputs(folder: Path, requests: list[MotionRequest]) -> None:
+    """Refuse a batch whose outputs (a motion's file, the summary) would replace one of its
+    inputs (the motions file, a motion's URDF, SRDF, scene or task), before anything is
+    planned."""
+    summary = folder / "summary.csv"
+    for request in requests:
+        inputs = {} if request.source is None else {"the motions file": request.source}
+        for key in FILE_FIELDS:
+            value = request.options.get(key)
+            if isinstance(value, str) and value:
+                inputs[f"its {key}"] = Path(value)
+        for output in (summary, _file(folder, request.id, True), _file(folder, request.id, False)):
+            for what, path in inputs.items():
+                if _same_file(output, path):
+                    raise ConfigurationError(
+                        f"motion {request.id!r}: its output {output} is {what} ({path}); "
+                        "give --out another folder or the motion another id"
+                    )
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    """Whether two paths name one file (through symbolic and hard links)."""
+    try:
+        return os.path.samefile(a, b)
+    except OSError:  # one of them does not exist (yet): the same place, or not
+        return os.path.realpath(a) == os.path.realpath(b)
 
 
 def _file(folder: Path, motion_id: str, planned: bool) -> Path:

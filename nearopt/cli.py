@@ -32,7 +32,16 @@ from .api import PlanRequest, check, prepare, solve
 from .catalog import available_robots
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .export import check_record, csv_text, json_text
-from .outputs import Output, OutputKind, check_outputs, resolve_output, write_outputs
+from .outputs import (
+    Output,
+    ReaderTolerant,
+    check_outputs,
+    is_standard_output,
+    quiet_standard_output,
+    refuse_inputs,
+    resolve_output,
+    write_outputs,
+)
 from .path import StraightPath
 from .planning import METHODS, Iteration, PlanResult, StopReason, TaskResult
 from .validate import check_rate
@@ -370,9 +379,12 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     request = plan_request(args)
     request.check()
     outputs, plots = _check_output_places(args)
-    to_stdout = any(o.kind is OutputKind.STDOUT for o in outputs.values())
-    out = sys.stderr if to_stdout else sys.stdout  # the standard output may carry a file
+    to_stdout = any(is_standard_output(o) for o in outputs.values())
+    # the standard output may carry a file: then every line goes to stderr; a reader that goes
+    # away (`| head -1`) costs the lines, not the plan or its files
+    out = ReaderTolerant(sys.stderr if to_stdout else sys.stdout)
     prepared = prepare(request)
+    refuse_inputs(outputs, prepared.input_files())
     quiet = args.quiet or args.stage1_only
 
     def progress(entry: Iteration) -> None:
@@ -621,6 +633,9 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command == "batch":
             return _batch_command(args)
         return _plan_command(args, interrupt)
+    except BrokenPipeError:  # what went to the standard output lost its reader (`| head`):
+        quiet_standard_output()  # end quietly, as a POSIX tool killed by SIGPIPE
+        return 128 + signal.SIGPIPE
     except VerificationError as exc:
         _fail(str(exc), code=1)
     except NearoptError as exc:

@@ -38,6 +38,10 @@ __all__ = [
     "Output",
     "resolve_output",
     "check_outputs",
+    "refuse_inputs",
+    "is_standard_output",
+    "ReaderTolerant",
+    "quiet_standard_output",
     "write_outputs",
     "make_folder",
     "write_atomically",
@@ -143,6 +147,83 @@ def check_outputs(targets: dict[str, str | Path]) -> dict[str, Output]:
             )
         seen[output.identity] = role
     return outputs
+
+
+def is_standard_output(output: Output) -> bool:
+    """Whether an output goes to the standard output: ``-``, or a path to what the standard
+    output is (``/dev/stdout``, ``/proc/self/fd/1``, the terminal or pipe it is)."""
+    if output.kind is OutputKind.STDOUT:
+        return True
+    try:
+        info = os.fstat(sys.stdout.fileno())
+    except (OSError, ValueError):  # no standard output (or one without a file)
+        return False
+    return output.kind is OutputKind.STREAM and output.identity == (info.st_dev, info.st_ino)
+
+
+def quiet_standard_output() -> None:
+    """Send the rest of the standard output to /dev/null: its reader has gone (a closed pipe,
+    ``| head``), and Python would complain about it again when it flushes at exit."""
+    with contextlib.suppress(OSError, ValueError):
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+        os.close(devnull)
+
+
+class ReaderTolerant:
+    """A text stream for progress lines that goes quiet when its reader has gone (a closed
+    pipe): the work and its files go on, the lines are dropped."""
+
+    def __init__(self, stream: object) -> None:
+        self.stream = stream
+        self.reader_gone = False
+
+    def write(self, text: str) -> int:
+        if not self.reader_gone:
+            try:
+                self.stream.write(text)  # type: ignore[attr-defined]
+            except BrokenPipeError:
+                self._gone()
+        return len(text)
+
+    def flush(self) -> None:
+        if not self.reader_gone:
+            try:
+                self.stream.flush()  # type: ignore[attr-defined]
+            except BrokenPipeError:
+                self._gone()
+
+    def _gone(self) -> None:
+        self.reader_gone = True
+        if self.stream is sys.stdout:
+            quiet_standard_output()
+
+
+def refuse_inputs(outputs: dict[str, Output], inputs: dict[str, str | Path]) -> None:
+    """Refuse an output that is one of the request's input files (the same file after
+    following symbolic links, or a hard link to it).
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the output's role, its path and the input it would destroy.
+    """
+    read: dict[object, tuple[str, str]] = {}
+    for what, path in inputs.items():
+        try:
+            info = Path(path).expanduser().stat()
+        except OSError:  # what cannot be read is refused where it is read
+            continue
+        read[(info.st_dev, info.st_ino)] = (what, str(path))
+    for role, output in outputs.items():
+        if output.identity in read:
+            what, path = read[output.identity]
+            same = os.path.realpath(Path(output.name).expanduser()) == os.path.realpath(path)
+            raise ConfigurationError(
+                f"{role} {output.name} is {what} of this request"
+                + ("" if same else f" (the same file as {path})")
+                + ": writing it would destroy it; give the output another path"
+            )
 
 
 def write_outputs(contents: dict[Output, str | bytes]) -> list[str]:

@@ -46,6 +46,14 @@ def urdf(tmp_path: Path, text: str, name: str = "bad.urdf") -> Path:
     return path
 
 
+FAR_BOX = '[[obstacle]]\nname = "box"\nbox = [0.1, 0.1, 0.1]\nposition = [5.0, 5.0, 5.0]\n'
+
+
+def hard_link(target: Path, link: Path) -> Path:
+    link.hardlink_to(target)
+    return link
+
+
 def edited(tmp_path: Path, old: str, new: str, count: int = 1) -> Path:
     """The chain of :func:`write_urdf` with ``old`` replaced by ``new`` (``count`` times)."""
     path = write_urdf(tmp_path)
@@ -789,6 +797,53 @@ CASES = {
         ],
         ConfigurationError,
         "ask for a rate of at most 555.6 Hz",
+    ),
+    "--json over the scene file": Case(
+        None,
+        lambda p: [
+            "--robot",
+            "two_link",
+            *PAPER,
+            "--scene",
+            str(urdf(p, FAR_BOX, "cell.toml")),
+            "--json",
+            str(p / "cell.toml"),
+        ],
+        ConfigurationError,
+        "cell.toml is the scene of this request: writing it would destroy it",
+    ),
+    "--csv over the URDF": Case(
+        None,
+        lambda p: [
+            "--urdf",
+            str(write_urdf(p)),
+            "--q0",
+            "0",
+            "0",
+            "--qe",
+            "1",
+            "1",
+            "--csv",
+            str(write_urdf(p)),
+        ],
+        ConfigurationError,
+        "is the URDF of this request",
+    ),
+    "--json over the task file (a hard link to it)": Case(
+        None,
+        lambda p: [
+            "--robot",
+            "two_link",
+            "--q0",
+            "0",
+            "0",
+            "--task",
+            str(urdf(p, "[[target]]\nq = [0.2, -0.3]\n", "t.toml")),
+            "--json",
+            str(hard_link(p / "t.toml", p / "t.json")),
+        ],
+        ConfigurationError,
+        "t.json is the task of this request (the same file as",
     ),
     "--plots is a file": Case(
         lambda p: save_figures(plan(*GOOD), urdf(p, "x", "taken.png")),

@@ -338,6 +338,7 @@ def test_bad_motion_files_are_one_line_errors(tmp_path: Path) -> None:
         '{"id": "../x"}\n': "ids are",
         "[1, 2]\n": "a motion is a JSON object",
         "{oops\n": "line 1: not JSON",
+        '{"id": "abc\\n", "robot": "two_link"}\n': "ids are",  # a newline in a file name
         "\n# nothing\n": "no motions",
     }
     for text, message in cases.items():
@@ -420,3 +421,26 @@ def test_a_changed_input_file_or_rate_is_planned_again(tmp_path: Path) -> None:
         assert run_batch(requests, out, pool, rate=500.0).skipped == 3  # now done at 500 Hz
     doc = json.loads((out / "t1.json").read_text())
     assert doc["t"][1] == pytest.approx(1 / 500)
+
+
+def test_a_batch_never_writes_over_its_inputs(tmp_path: Path) -> None:
+    """A motion whose id is the motions file's stem, with --out at the file's folder, would
+    write <id>.json over the motions file; one whose id names its own task file likewise:
+    both refused in one line before anything is planned, the inputs as they were."""
+    motions = tmp_path / "cycle.json"
+    text = json.dumps({"id": "cycle", "robot": "two_link", "q0": [0, 0], "qe": [0.3, 0.3]})
+    motions.write_text(text + "\n")
+    run = batch(str(motions), "--out", str(tmp_path), timeout=120)
+    assert run.returncode == 2, run.stderr
+    assert "its output" in run.stderr and "is the motions file" in run.stderr
+    assert motions.read_text() == text + "\n"
+    assert not (tmp_path / "summary.csv").exists()
+    task = tmp_path / "out" / "t.json"
+    task.parent.mkdir()
+    task.write_text("[[target]]\nq = [0.2, -0.3]\n")
+    with pytest.raises(nearopt.ConfigurationError, match="is its task"):
+        run_batch(
+            [MotionRequest("t", {"robot": "two_link", "q0": [0, 0], "task": str(task)})],
+            tmp_path / "out",
+        )
+    assert task.read_text() == "[[target]]\nq = [0.2, -0.3]\n"

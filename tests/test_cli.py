@@ -352,3 +352,40 @@ def test_a_motion_too_long_to_record_is_refused_in_bounded_memory(tmp_path: Path
     assert len(line) == 1 and "ask for a rate of at most 555.6 Hz (--rate)" in line[0], line
     assert "2,000,002 samples" in line[0]
     assert not (tmp_path / "long.json").exists()
+
+
+PAPER_ARGS = ["--robot", "two_link", "--q0", "45", "-90", "--qe", "-90", "0", "--deg"]
+
+
+def test_a_record_to_the_standard_output_is_all_it_carries(tmp_path: Path) -> None:
+    """``--json /dev/stdout | consumer``: the progress and "wrote" lines go to stderr whenever
+    an output is the standard output (by ``-`` or by any path to it), so the consumer reads the
+    JSON alone."""
+    for target in ("/dev/stdout", "-"):
+        done = run("plan", *PAPER_ARGS, "--max-iterations", "2", "--json", target)
+        assert done.returncode == 0, done.stderr
+        document = json.loads(done.stdout)
+        assert document["robot"] == "two_link" and len(document["t"]) > 100
+        assert "iteration" in done.stderr and "wrote" in done.stderr
+
+
+def test_a_reader_that_goes_away_ends_quietly(tmp_path: Path) -> None:
+    """``nearopt plan … | head -1``: the lines after the first are dropped, the plan's file is
+    still written, exit 0 and no "Broken pipe"; a record to a pipe closed before it was read
+    ends quietly: 141 (128 + SIGPIPE, as POSIX tools do) when the write saw the pipe closed,
+    0 when the pipe took it all first."""
+    command = f"{sys.executable} -m nearopt.cli"
+    out = tmp_path / "plan.json"
+    script = (
+        f"{command} plan {' '.join(PAPER_ARGS)} --max-iterations 3 --json {out} | head -1; "
+        f"echo status ${{PIPESTATUS[0]}}; "
+        f"{command} plan {' '.join(PAPER_ARGS)} --quiet --max-iterations 1 --rate 10000 "
+        "--json - | head -c 10; echo; echo status ${PIPESTATUS[0]}"
+    )
+    done = subprocess.run(
+        ["bash", "-c", script], capture_output=True, text=True, timeout=600, cwd=tmp_path
+    )
+    statuses = [line.split()[1] for line in done.stdout.splitlines() if line.startswith("status")]
+    assert statuses[0] == "0" and statuses[1] in ("0", "141"), (done.stdout, done.stderr)
+    assert "Broken pipe" not in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert json.loads(out.read_text())["robot"] == "two_link"
