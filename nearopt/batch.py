@@ -24,13 +24,17 @@ request (the same options, the same contents of the files they name, the same ra
 
 from __future__ import annotations
 
+import ast
 import concurrent.futures as cf
+import contextlib
 import csv
 import io
 import json
 import multiprocessing
 import os
 import re
+import socket
+import struct
 import sys
 import threading
 import time
@@ -60,6 +64,8 @@ __all__ = [
     "plan_request",
     "plan_many",
     "run_batch",
+    "probe_scheduler",
+    "check_main_guard",
     "BatchSummary",
     "SUMMARY_FIELDS",
 ]
@@ -319,6 +325,47 @@ class Pool:
         self.close()
 
 
+def check_main_guard() -> None:
+    """Refuse to start worker processes from the top level of a script without
+    ``if __name__ == "__main__":``: each spawned worker imports the script again, so it would run
+    the script's top level (and start workers of its own, which Python refuses: every motion
+    then failed as a dead worker).
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the script and the line of the call.
+    """
+    import __main__
+
+    script = getattr(__main__, "__file__", None)
+    if script is None:  # an interactive session, python -c: nothing is imported again
+        return
+    frame = sys._getframe(1)  # noqa: SLF001 - the script's top level, where it runs now
+    while frame is not None and not (
+        frame.f_code.co_name == "<module>" and frame.f_globals is vars(__main__)
+    ):
+        frame = frame.f_back
+    if frame is None:  # not under the script's top level (a thread, a callback)
+        return
+    try:
+        tree = ast.parse(Path(script).read_text(encoding="utf-8"))
+    except (OSError, SyntaxError, ValueError):
+        return
+    line = frame.f_lineno
+    for node in tree.body:
+        if (
+            isinstance(node, ast.If)
+            and ast.unparse(node.test).replace("'", '"') == '__name__ == "__main__"'
+            and node.lineno <= line <= (node.end_lineno or node.lineno)
+        ):
+            return
+    raise ConfigurationError(
+        f"{script}, line {line}: plan_many and run_batch start worker processes that import "
+        'this script again; put the call under `if __name__ == "__main__":` (see the README)'
+    )
+
+
 class LocalPool(Pool):
     """One worker process per core of this machine (:mod:`concurrent.futures`, spawned fresh,
     one BLAS thread each). A worker that dies (killed, out of memory) is replaced and the motions
@@ -334,6 +381,7 @@ class LocalPool(Pool):
         count = (os.cpu_count() or 1) if workers is None else workers
         if not isinstance(count, int) or isinstance(count, bool) or count < 1:
             raise ConfigurationError(f"workers must be a positive integer, got {workers!r}")
+        check_main_guard()
         self.workers = count
         self._executor: cf.ProcessPoolExecutor | None = None
 
@@ -409,6 +457,80 @@ def _died(request: MotionRequest, attempts: int) -> MotionOutcome:
     )
 
 
+PROBE_SECONDS = 3.0
+"""How long :func:`probe_scheduler` waits for a connection and for the scheduler's greeting."""
+
+
+def probe_scheduler(address: str, wait: float = PROBE_SECONDS) -> None:
+    """Check that a Dask scheduler answers at ``address`` (``tcp://host:port`` or
+    ``host:port``; other protocols are left to Dask), within ``wait`` seconds twice at most.
+
+    A scheduler speaks first: on a new connection it sends its handshake, a message whose
+    first 8 bytes are its length. Anything else is named: nothing listening, no answer, an
+    HTTP server (the dashboard, port 8787, is the commonest slip), another kind of server.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the address and what answered there.
+    """
+    text = str(address)
+    scheme, _, rest = text.rpartition("://")
+    if scheme not in ("", "tcp"):
+        return
+    host, colon, port = rest.rpartition(":")
+    if not colon or not port.isdigit() or not 0 < int(port) < 65536:
+        raise ConfigurationError(
+            f"--scheduler {text}: give the scheduler's host and port, e.g. tcp://10.0.0.5:8786"
+        )
+    where = f"the Dask scheduler at {text}"
+    try:
+        sock = socket.create_connection((host.strip("[]") or "127.0.0.1", int(port)), wait)
+    except TimeoutError:
+        raise ConfigurationError(f"cannot connect to {where}: no answer in {wait:g} s") from None
+    except OSError as exc:
+        raise ConfigurationError(f"cannot connect to {where}: {exc.strerror or exc}") from None
+    with sock:
+        greeting = _received(sock, 8, wait)
+        if len(greeting) == 8 and struct.unpack("<Q", greeting)[0] < 2**24:
+            return  # a Dask message: its length, then the handshake
+        reply = b""
+        if not greeting:  # silent: an HTTP server waits for a request
+            with contextlib.suppress(OSError):
+                sock.sendall(b"GET / HTTP/1.0\r\n\r\n")
+            reply = _received(sock, 5, wait)
+    if (greeting or reply).startswith(b"HTTP/"):
+        raise ConfigurationError(
+            f"{text} is an HTTP server, not a Dask scheduler — the dashboard? the scheduler "
+            "listens on port 8786 unless it was told otherwise"
+        )
+    if greeting:
+        raise ConfigurationError(
+            f"{text} answered, but not as a Dask scheduler (it sent {greeting!r:.40})"
+        )
+    raise ConfigurationError(
+        f"{text} accepted the connection but said nothing in {wait:g} s: not a Dask scheduler"
+    )
+
+
+def _received(sock: socket.socket, count: int, wait: float) -> bytes:
+    """Up to ``count`` bytes from ``sock``, waiting at most ``wait`` seconds in all."""
+    data, deadline = b"", time.monotonic() + wait
+    while len(data) < count:
+        left = deadline - time.monotonic()
+        if left <= 0:
+            break
+        sock.settimeout(left)
+        try:
+            chunk = sock.recv(count - len(data))
+        except OSError:  # a timeout or a reset: what came so far
+            break
+        if not chunk:
+            break
+        data += chunk
+    return data
+
+
 class DaskPool(Pool):
     """The workers of a ``dask.distributed`` scheduler (``pip install 'nearopt[batch]'``;
     the workers need nearopt installed, and any URDF, scene or task file at the same path).
@@ -435,6 +557,7 @@ class DaskPool(Pool):
         if isinstance(address, distributed.Client):
             self.client, self._own = address, False
         else:
+            probe_scheduler(str(address))
             try:
                 self.client = distributed.Client(address, timeout=timeout)
             except (OSError, TimeoutError, ValueError) as exc:
@@ -632,6 +755,8 @@ def run_batch(
     """
     t0 = time.perf_counter()
     check_rate(rate)
+    if isinstance(client, str):  # a scheduler that is not there is said before anything is made
+        probe_scheduler(client)
     folder = make_folder(out, "the motions")
     _refuse_inputs(folder, requests)
     outcomes: dict[str, MotionOutcome] = {}

@@ -444,3 +444,67 @@ def test_a_batch_never_writes_over_its_inputs(tmp_path: Path) -> None:
             tmp_path / "out",
         )
     assert task.read_text() == "[[target]]\nq = [0.2, -0.3]\n"
+
+
+def test_a_scheduler_address_that_is_not_a_scheduler_is_named_at_once(tmp_path: Path) -> None:
+    """--scheduler at a port where nothing listens, at one that accepts and stays silent, at an
+    HTTP server (the dashboard's port is the commonest slip) and at a server that greets in
+    another protocol: one line each naming what answered, nothing written, and no hang (the
+    probe waits 3 s at most twice; the run's timeout guards against a hang)."""
+    import http.server
+    import threading
+
+    table = write_motions(tmp_path, motions(1)[:1])
+    silent = socket.socket()
+    silent.bind(("127.0.0.1", 0))
+    silent.listen()
+    http_server = http.server.HTTPServer(("127.0.0.1", 0), http.server.SimpleHTTPRequestHandler)
+    threading.Thread(target=http_server.serve_forever, daemon=True).start()
+    greeter = socket.socket()
+    greeter.bind(("127.0.0.1", 0))
+    greeter.listen()
+
+    def greet() -> None:
+        connection, _ = greeter.accept()
+        connection.sendall(b"SSH-2.0-OpenSSH_9.2\r\n")
+
+    threading.Thread(target=greet, daemon=True).start()
+    cases = {
+        f"tcp://127.0.0.1:{free_port()}": "Connection refused",
+        f"tcp://127.0.0.1:{silent.getsockname()[1]}": "said nothing in 3 s",
+        f"127.0.0.1:{http_server.server_address[1]}": "is an HTTP server, not a Dask scheduler",
+        f"tcp://127.0.0.1:{greeter.getsockname()[1]}": "not as a Dask scheduler (it sent b'SSH",
+        "tcp://127.0.0.1": "give the scheduler's host and port",
+    }
+    try:
+        for address, says in cases.items():
+            out = tmp_path / "out"
+            run = batch(str(table), "--out", str(out), "--scheduler", address, timeout=60)
+            assert run.returncode == 2, (address, run.stderr)
+            lines = run.stderr.strip().splitlines()
+            assert len(lines) == 1 and says in lines[0], (address, lines)
+            assert not out.exists()  # nothing made, not even the folder
+    finally:
+        http_server.shutdown()
+        silent.close()
+        greeter.close()
+
+
+def test_plan_many_at_a_scripts_top_level_asks_for_the_main_guard(tmp_path: Path) -> None:
+    """A script that calls plan_many at its top level, or a function that does from its top
+    level, without `if __name__ == "__main__":`: each spawned worker would import the script
+    again (every motion failed as a dead worker, the script's top level ran in each). One
+    error naming the script and the line, before any worker starts."""
+    call = 'nearopt.plan_many([{"robot": "two_link", "q0": [0, 0], "qe": [0.3, 0.3]}])'
+    for name, text, line in (
+        ("top.py", f"import nearopt\n{call}\n", 2),
+        ("function.py", f"import nearopt\n\n\ndef main():\n    {call}\n\n\nmain()\n", 8),
+    ):
+        script = tmp_path / name
+        script.write_text(text)
+        run = subprocess.run(
+            [sys.executable, str(script)], capture_output=True, text=True, timeout=120
+        )
+        assert run.returncode != 0
+        assert f"{script}, line {line}: plan_many and run_batch start worker" in run.stderr
+        assert 'if __name__ == "__main__":' in run.stderr and "WorkerDied" not in run.stderr
