@@ -116,6 +116,13 @@ class MotionRequest:
                 "starting with a letter or digit (they name the output files)"
             )
         options = {k: _plain(v) for k, v in data.items() if k != "id"}
+        for key, value in options.items():
+            if not _is_json(value):
+                what = "a robot's name (e.g. 'panda') or urdf=PATH" if key == "robot" else "JSON"
+                raise ConfigurationError(
+                    f"option {key!r}: a motion's options are JSON values ({what}), got "
+                    f"{type(value).__name__} {value!r:.60}"
+                )
         base = Path.cwd() if folder is None else folder
         for key in FILE_FIELDS:
             if isinstance(options.get(key), str) and options[key]:
@@ -152,6 +159,13 @@ def _plain(value: object) -> object:
     if isinstance(value, tuple | list):
         return [_plain(v) for v in value]
     return value
+
+
+def _is_json(value: object) -> bool:
+    """Whether a value is one JSON holds: a string, number, true/false, null or a list."""
+    if isinstance(value, list):
+        return all(_is_json(v) for v in value)
+    return value is None or isinstance(value, str | int | float | bool)
 
 
 class OutcomeStatus(StrEnum):
@@ -661,6 +675,12 @@ def _pool(client: object | None, workers: int | None) -> Pool:
         return client
     if workers is not None:
         raise ConfigurationError("workers applies to this machine's pool, not to a Dask client")
+    if not isinstance(client, str) and type(client).__name__ != "Client":
+        raise ConfigurationError(
+            "client must be None (this machine), a scheduler address such as "
+            f"'tcp://10.0.0.5:8786', a distributed.Client or a Pool, got "
+            f"{type(client).__name__} {client!r:.60}"
+        )
     return DaskPool(client)
 
 

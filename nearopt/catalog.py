@@ -119,6 +119,8 @@ def robot_entry(name: str) -> RobotEntry:
     RobotNotFoundError
         If the name is unknown; the message lists the known names.
     """
+    if not isinstance(name, str):  # a list or an array: unknown, not unhashable
+        raise RobotNotFoundError(f"{name!r:.60}", available_robots())
     if name in _BUNDLED:
         return RobotEntry(name, _bundled_dir() / f"{name}.urdf", _BUNDLED[name])
     if name in _ERD_ARMS:

@@ -55,7 +55,18 @@ class TorqueCost:
     def __init__(self, beta: float | None = None, *, weights: ArrayLike | None = None) -> None:
         if (beta is None) == (weights is None):
             raise ConfigurationError("give either beta or weights")
-        w = np.atleast_1d(np.asarray(beta if weights is None else weights, dtype=float))
+        if beta is not None and np.ndim(beta) != 0:
+            raise ConfigurationError(
+                f"beta is one number (f0 = 1 + β Σ u²), got {beta!r:.60}; per-joint weights "
+                "go by name: TorqueCost(weights=[...])"
+            )
+        try:
+            w = np.atleast_1d(np.asarray(beta if weights is None else weights, dtype=float))
+        except (TypeError, ValueError):
+            what = "beta" if weights is None else "weights"
+            raise ConfigurationError(
+                f"{what} must be numbers, got {beta if weights is None else weights!r:.60}"
+            ) from None
         if w.ndim != 1 or not np.all(np.isfinite(w)) or np.any(w < 0):
             what = "beta" if weights is None else "weights"
             raise ConfigurationError(f"{what} must be finite and ≥ 0, got {w.tolist()}")

@@ -46,7 +46,12 @@ class Path(Protocol):
 
 
 def _as_joint_vector(x: ArrayLike, what: str) -> NDArray[np.float64]:
-    a = np.asarray(x, dtype=float)
+    try:
+        a = np.asarray(x, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigurationError(
+            f"{what} must be a joint vector of numbers, got {x!r:.60}"
+        ) from None
     if a.ndim != 1 or a.size == 0:
         raise ConfigurationError(f"{what} must be a 1-D joint vector, got shape {a.shape}")
     if not np.all(np.isfinite(a)):

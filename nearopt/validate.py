@@ -7,7 +7,7 @@ import numpy as np
 
 from .errors import ConfigurationError
 
-__all__ = ["MAX_RATE", "MAX_SAMPLES", "check_rate", "check_samples"]
+__all__ = ["MAX_RATE", "MAX_SAMPLES", "check_rate", "check_robot", "check_samples"]
 
 MAX_RATE = 1e6
 """[Hz] A sampling or controller rate above a megahertz is a mistake, not a controller."""
@@ -44,4 +44,21 @@ def check_samples(rate: float, duration: float, what: str = "rate") -> None:
         raise ConfigurationError(
             f"{what} {rate:g} Hz over te = {duration:.4g} s gives more than {MAX_SAMPLES:.0e} "
             "samples"
+        )
+
+
+def check_robot(robot: object, what: str = "robot") -> None:
+    """That ``robot`` is a :class:`~nearopt.Robot`.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the argument and what it got.
+    """
+    from .robot import Robot
+
+    if not isinstance(robot, Robot):
+        raise ConfigurationError(
+            f"{what} must be a nearopt.Robot (e.g. Robot.from_name('two_link') or "
+            f"Robot.from_urdf(path)), got {type(robot).__name__} {robot!r:.60}"
         )

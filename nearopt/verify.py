@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 import pinocchio as pin
 
-from .errors import VerificationError
+from .errors import ConfigurationError, VerificationError
 from .validate import check_rate
 
 if TYPE_CHECKING:
@@ -234,6 +234,7 @@ def verify(
         If the rate is not a number of Hz in (0, 1e6] or q0 / qe have the wrong length.
     """
     rate = check_rate(rate, "the controller rate")
+    _check_motion(trajectory, robot)
     tol = Tolerances(
         torque_tolerance,
         limit_tolerance,
@@ -290,6 +291,39 @@ class Planned(Protocol):
     def waypoints(self) -> tuple[Waypoint, ...]: ...
 
 
+def _check_motion(trajectory: object, robot: object) -> None:
+    """That verify was given a motion of this robot (a plan is verified by verify_plan).
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the argument, what it is and what to pass instead.
+    """
+    from .robot import Robot
+    from .trajectory import Motion
+
+    if not isinstance(robot, Robot):
+        raise ConfigurationError(
+            f"robot must be a nearopt.Robot, got {type(robot).__name__} {robot!r:.60}"
+        )
+    if not isinstance(trajectory, Motion):
+        hint = (
+            ": pass its motion, result.trajectory, or verify_plan(result), which knows q0, qe "
+            "and the scene too"
+            if hasattr(trajectory, "trajectory")
+            else ""
+        )
+        raise ConfigurationError(
+            f"verify checks a motion (a Trajectory), got {type(trajectory).__name__}{hint}"
+        )
+    joints = trajectory.states(np.zeros(1))[0].shape[1]
+    if joints != robot.n:
+        raise ConfigurationError(
+            f"the motion moves {joints} joints but {robot.name} has {robot.n}: verify a motion "
+            "with the robot it was planned for"
+        )
+
+
 def verify_plan(
     plan: Planned,
     *,
@@ -321,6 +355,11 @@ def verify_plan(
     ConfigurationError
         As :func:`verify`.
     """
+    if not all(hasattr(plan, name) for name in ("trajectory", "robot", "J", "cost")):
+        raise ConfigurationError(
+            f"verify_plan checks a plan (a PlanResult or TaskResult), got "
+            f"{type(plan).__name__} {plan!r:.60}; a motion alone: verify(motion, robot)"
+        )
     return verify(
         plan.trajectory,
         plan.robot,

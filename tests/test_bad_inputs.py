@@ -747,6 +747,49 @@ CASES = {
         ConfigurationError,
         "the controller rate must be a number of Hz in (0, 1e+06], got -1",
     ),
+    # ------------------------------------------------------------ the Python API, misused
+    "verify with another robot's motion": Case(
+        lambda p: nearopt.verify(plan(*GOOD).trajectory, load("ur5")),
+        None,
+        ConfigurationError,
+        "the motion moves 2 joints but ur5 has 6",
+    ),
+    "verify(result) instead of verify(result.trajectory)": Case(
+        lambda p: nearopt.verify(plan(*GOOD), two_link()),
+        None,
+        ConfigurationError,
+        "pass its motion, result.trajectory, or verify_plan(result)",
+    ),
+    "time_limit as a string": Case(
+        lambda p: plan(*GOOD, time_limit="5"),
+        None,
+        ConfigurationError,
+        "time_limit must be a positive number of seconds",
+    ),
+    "TorqueCost(array) for per-joint weights": Case(
+        lambda p: nearopt.TorqueCost(np.array([0.1, 0.2])),
+        None,
+        ConfigurationError,
+        "per-joint weights go by name: TorqueCost(weights=[...])",
+    ),
+    "plan_many with a Robot object in a request": Case(
+        lambda p: nearopt.plan_many([{"robot": two_link(), "q0": [0, 0], "qe": [1, 1]}]),
+        None,
+        ConfigurationError,
+        "option 'robot': a motion's options are JSON values",
+    ),
+    "plan_many with client=42": Case(
+        lambda p: nearopt.plan_many([{"robot": "two_link", "q0": [0, 0], "qe": [1, 1]}], 42),
+        None,
+        ConfigurationError,
+        "client must be None (this machine), a scheduler address",
+    ),
+    "q0=None": Case(
+        lambda p: plan(None, THETA_E),
+        None,
+        ConfigurationError,
+        "q0 is missing: give 2 values",
+    ),
     # ------------------------------------------------------------ command line and outputs
     "q0 that is not a number": Case(
         None,

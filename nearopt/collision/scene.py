@@ -209,14 +209,14 @@ class Scene:
                     field="name",
                 )
             seen.add(ob.name)
-        if not (
-            isinstance(self.margin, int | float)
-            and math.isfinite(self.margin)
-            and self.margin >= 0.0
+        number = isinstance(self.margin, int | float | np.integer | np.floating)
+        if isinstance(self.margin, bool) or not (
+            number and math.isfinite(self.margin) and self.margin >= 0.0
         ):
             raise SceneError(
                 f"margin must be a distance ≥ 0 [m], got {self.margin!r}", field="margin"
             )
+        object.__setattr__(self, "margin", float(self.margin))  # numpy's floats as Python's
 
     def with_margin(self, margin: float) -> Scene:
         """This scene with another margin [m]."""

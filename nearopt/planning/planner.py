@@ -153,6 +153,11 @@ def plan(
         or no collision-free path was found within the time limit.
     """
     t_start = time.perf_counter()
+    if callback is not None and not callable(callback):
+        raise ConfigurationError(
+            f"callback must be a function of one Iteration, got {type(callback).__name__} "
+            f"{callback!r:.60}"
+        )
     setup = _setup(
         robot,
         q0,
@@ -218,10 +223,12 @@ def _setup(
                 + (f" and ≤ {high}" if high < np.inf else "")
                 + f", got {value!r}"
             )
-    if not (time_limit > 0):
+    number = isinstance(time_limit, int | float | np.integer | np.floating)
+    if isinstance(time_limit, bool) or not (number and time_limit > 0):
         raise ConfigurationError(
-            f"time_limit must be a positive number of seconds, got {time_limit}"
+            f"time_limit must be a positive number of seconds (inf: none), got {time_limit!r}"
         )
+
     q0 = robot.check_configuration(q0, "q0")
     goal = qe if isinstance(qe, ToolPose) else None
     if goal is not None:  # inverse kinematics from the start, within the position limits

@@ -434,6 +434,11 @@ class Robot:
         lim = self.limits
         e_lo, e_hi = lim.effort_lower, lim.effort_upper
         if effort is not None:
+            if isinstance(effort, tuple) and len(effort) != 2:
+                raise ConfigurationError(
+                    "effort is a limit per joint, or a tuple (lower, upper) of them, got "
+                    f"a tuple of {len(effort)}"
+                )
             if isinstance(effort, tuple):
                 e_lo = self._joint_array(effort[0], "lower effort limit")
                 e_hi = self._joint_array(effort[1], "upper effort limit")
@@ -801,6 +806,11 @@ class Robot:
     def _joint_array(
         self, x: ArrayLike, what: str, *, allow_inf: bool = False
     ) -> NDArray[np.float64]:
+        if x is None:
+            raise ConfigurationError(
+                f"{what} is missing: give {self.n} values (one per joint of {self.name}: "
+                f"{', '.join(self.joint_names)})"
+            )
         try:
             a = np.asarray(x, dtype=float)
         except (TypeError, ValueError) as exc:

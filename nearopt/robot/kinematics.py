@@ -17,6 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError, UnreachablePoseError
+from ..validate import check_robot
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -136,6 +137,12 @@ def inverse_kinematics(
     ConfigurationError
         An unknown frame (the message lists the frames).
     """
+    check_robot(robot)
+    if not isinstance(pose, ToolPose):
+        raise ConfigurationError(
+            f"pose must be a nearopt.ToolPose (position [m], optional quaternion, frame), got "
+            f"{type(pose).__name__} {pose!r:.60}"
+        )
     model, data = robot.model, robot.new_data()
     fid = robot.frame_id(pose.frame)
     lim = robot.limits

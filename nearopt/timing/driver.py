@@ -13,6 +13,7 @@ from ..cost import Cost, TimeCost, check_cost
 from ..errors import ConfigurationError, SolverError
 from ..path import Path
 from ..trajectory import Trajectory
+from ..validate import check_robot
 from .between import BetweenSamples, inherit_margins, tighten, uniform_slow_down
 from .problem import build_timing_problem
 from .solvers import TimingMethod, TimingSolution, TimingStatus, out_of_time, solve_timing
@@ -126,6 +127,7 @@ def optimal_timing(
     """
     t0 = time.perf_counter()
     deadline = t0 + time_limit
+    check_robot(robot)
     cost = TimeCost() if cost is None else check_cost(cost)
     if not isinstance(path, Path):
         raise ConfigurationError(
