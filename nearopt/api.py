@@ -488,7 +488,7 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
     if request.q0 is not None:
         q0 = _joint_values(request.q0, request.deg)
     elif task is not None and task.start is not None:
-        q0 = np.asarray(task.start)
+        q0 = robot.check_configuration(task.start, f"{request.task}: start")
     else:
         raise ConfigurationError(
             f"give the start configuration: --q0, or start = [...] in {request.task}"

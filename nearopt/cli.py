@@ -448,11 +448,12 @@ def _print_summary(result: PlanResult | TaskResult, out: TextIO) -> None:
                 file=out,
             )
     else:
-        first = (
-            "straight line"
-            if isinstance(result.initial.trajectory.path, StraightPath)
-            else ("first path, from OMPL")
-        )
+        if isinstance(result.initial.trajectory.path, StraightPath):
+            first = "straight line"
+        elif result.clearance is not None:  # around the obstacles
+            first = "first path, from OMPL"
+        else:
+            first = "first path, through the via-points"
         print(
             f"{result.status}: J = {result.J:.6f} ({first} {result.initial.J:.6f}), "
             f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "

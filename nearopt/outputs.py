@@ -95,6 +95,10 @@ def resolve_output(target: str | Path) -> Output:
         info = os.fstat(sys.stdout.fileno())
         return Output(name, OutputKind.STDOUT, None, (info.st_dev, info.st_ino))
     given = Path(name).expanduser()
+    if name.endswith(("/", os.sep)) and not given.is_dir():  # pathlib drops the slash
+        raise ConfigurationError(
+            f"cannot write {name}: it names a folder, which does not exist; give a file name"
+        )
     try:
         info = given.stat()  # follows links
     except FileNotFoundError:

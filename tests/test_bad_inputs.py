@@ -46,6 +46,7 @@ def urdf(tmp_path: Path, text: str, name: str = "bad.urdf") -> Path:
     return path
 
 
+START3 = "start = [0.1, 0.2, 0.3]\n[[target]]\nq = [0.2, -0.3]\n"
 FAR_BOX = '[[obstacle]]\nname = "box"\nbox = [0.1, 0.1, 0.1]\nposition = [5.0, 5.0, 5.0]\n'
 
 
@@ -790,7 +791,29 @@ CASES = {
         ConfigurationError,
         "q0 is missing: give 2 values",
     ),
+    "a goal pose the tool already holds": Case(
+        lambda p: nearopt.plan(
+            two_link(), THETA_0, nearopt.ToolPose(two_link().frame_placement(THETA_0).translation)
+        ),
+        None,
+        ConfigurationError,
+        "frame already holds the goal pose at q0",
+    ),
+    "a task's start of the wrong length": Case(
+        lambda p: nearopt.plan_task(
+            two_link(), None, nearopt.Task.from_file(urdf(p, START3, "t.toml"))
+        ),
+        lambda p: ["--robot", "two_link", "--task", str(urdf(p, START3, "t.toml"))],
+        ConfigurationError,
+        "t.toml: start must have 2 values",
+    ),
     # ------------------------------------------------------------ command line and outputs
+    "--json into a folder that does not exist (a trailing slash)": Case(
+        None,
+        lambda p: ["--robot", "two_link", *PAPER, "--json", str(p / "newdir") + "/"],
+        ConfigurationError,
+        "it names a folder, which does not exist",
+    ),
     "q0 that is not a number": Case(
         None,
         lambda p: ["--robot", "two_link", "--q0", "abc", "0", "--qe", "1", "1"],

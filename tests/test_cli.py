@@ -389,3 +389,11 @@ def test_a_reader_that_goes_away_ends_quietly(tmp_path: Path) -> None:
     assert statuses[0] == "0" and statuses[1] in ("0", "141"), (done.stdout, done.stderr)
     assert "Broken pipe" not in done.stderr and "Traceback" not in done.stderr, done.stderr
     assert json.loads(out.read_text())["robot"] == "two_link"
+
+
+def test_the_summary_names_where_the_first_path_came_from(tmp_path: Path) -> None:
+    """A plan with via-points and no scene starts from a path through them, not from OMPL."""
+    done = run_cli("plan", *PAPER_ARGS, "--via", "0", "-45", "--max-iterations", "1", "--quiet")
+    assert done.returncode == 0, done.stderr
+    assert "(first path, through the via-points" in done.stdout, done.stdout
+    assert "OMPL" not in done.stdout

@@ -241,6 +241,11 @@ def _setup(
     if vias and method != Method.SCP:
         raise ConfigurationError("via-points need method 'scp' (the B-spline path)")
     if np.array_equal(q0, qe) and not vias:
+        if goal is not None:
+            raise ConfigurationError(
+                f"the {goal.frame or robot.tip!r} frame already holds the goal pose at q0: there "
+                "is nothing to plan (the arm stays where it is)"
+            )
         raise ConfigurationError(
             "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
         )

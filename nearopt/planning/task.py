@@ -399,8 +399,10 @@ def plan_task(
             f"{settings!r:.60}"
         )
     records = _targets(targets.targets if isinstance(targets, Task) else targets)
+    what = "q0"
     if q0 is None and isinstance(targets, Task) and targets.start is not None:
         q0 = targets.start
+        what = f"{targets.source or 'the task'}: start"
     if q0 is None:
         raise ConfigurationError("give the start configuration q0 (the task has no start)")
     cost = TimeCost() if cost is None else cost
@@ -413,7 +415,7 @@ def plan_task(
         raise ConfigurationError(
             f"time_limit must be a positive number of seconds, got {time_limit!r}"
         )
-    q0 = robot.check_configuration(q0, "q0")
+    q0 = robot.check_configuration(q0, what)
     check_targets(
         robot,
         records,
