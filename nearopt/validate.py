@@ -41,9 +41,11 @@ def check_samples(rate: float, duration: float, what: str = "rate") -> None:
         Naming the rate, the duration and the cap.
     """
     if rate * duration > MAX_SAMPLES:
+        days = f" ({duration / 86400:.3g} days)" if duration > 86400 else ""
         raise ConfigurationError(
-            f"{what} {rate:g} Hz over te = {duration:.4g} s gives more than {MAX_SAMPLES:.0e} "
-            "samples"
+            f"the motion lasts {duration:.4g} s{days}: {what} {rate:g} Hz over it gives more "
+            f"than {MAX_SAMPLES:.0e} samples to check; ask for a lower rate, or raise the limits "
+            "that make it this slow"
         )
 
 

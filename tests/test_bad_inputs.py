@@ -807,6 +807,12 @@ CASES = {
         ConfigurationError,
         "t.toml: start must have 2 values",
     ),
+    "a speed limit that makes the motion last 273 days": Case(
+        None,
+        lambda p: ["--robot", "two_link", *PAPER, "--velocity-scale", "1e-9"],
+        ConfigurationError,
+        "the motion lasts 2.356e+07 s (273 days)",
+    ),
     # ------------------------------------------------------------ command line and outputs
     "--json into a folder that does not exist (a trailing slash)": Case(
         None,
