@@ -39,6 +39,7 @@ from .planning import (
     plan,
     plan_task,
 )
+from .planning.planner import minimum_duration
 from .planning.task import check_targets
 from .robot import Robot
 from .robot.kinematics import ToolPose
@@ -504,6 +505,9 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
         check_targets(robot, task.targets, q0, where=str(task.source))  # type: ignore[union-attr]
     scene = Scene.from_file(request.scene) if request.scene is not None else None
     via = [_joint_values(v, request.deg) for v in request.via]
+    if isinstance(qe, np.ndarray) and qe.shape == q0.shape:  # too slow to check: said now
+        shortest = minimum_duration(robot, q0, qe, not request.no_velocity_limits)[0]
+        check_samples(request.rate, shortest, "--rate", at_least=True)
     return Prepared(request, robot, q0, qe, task, scene, request.cost(), via)
 
 

@@ -31,7 +31,7 @@ def check_rate(rate: object, what: str = "rate") -> float:
     return float(rate)  # type: ignore[arg-type]
 
 
-def check_samples(rate: float, duration: float, what: str = "rate") -> None:
+def check_samples(rate: float, duration: float, what: str = "rate", at_least: bool = False) -> None:
     """That a motion of ``duration`` [s] written at ``rate`` [Hz] has at most
     :data:`MAX_SAMPLES` samples.
 
@@ -42,8 +42,9 @@ def check_samples(rate: float, duration: float, what: str = "rate") -> None:
     """
     if rate * duration > MAX_SAMPLES:
         days = f" ({duration / 86400:.3g} days)" if duration > 86400 else ""
+        lasts = "would last at least" if at_least else "lasts"
         raise ConfigurationError(
-            f"the motion lasts {duration:.4g} s{days}: {what} {rate:g} Hz over it gives more "
+            f"the motion {lasts} {duration:.4g} s{days}: {what} {rate:g} Hz over it gives more "
             f"than {MAX_SAMPLES:.0e} samples to check; ask for a lower rate, or raise the limits "
             "that make it this slow"
         )

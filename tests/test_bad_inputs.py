@@ -811,7 +811,13 @@ CASES = {
         None,
         lambda p: ["--robot", "two_link", *PAPER, "--velocity-scale", "1e-9"],
         ConfigurationError,
-        "the motion lasts 2.356e+07 s (273 days)",
+        "the motion would last at least 2.356e+07 s (273 days)",
+    ),
+    "a speed limit of 1e-300 rad/s (b underflowed: 'b must be finite')": Case(
+        lambda p: nearopt.plan(two_link().with_limits(velocity=1e-300), *GOOD),
+        lambda p: ["--robot", "two_link", *PAPER, "--velocity-limit", "1e-300"],
+        ConfigurationError,
+        "e+300 s",  # how long it would take, at least
     ),
     # ------------------------------------------------------------ command line and outputs
     "--json into a folder that does not exist (a trailing slash)": Case(

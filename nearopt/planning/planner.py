@@ -55,9 +55,29 @@ from .start import first_path
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["plan", "METHODS", "MAX_CONTROL_POINTS"]
+__all__ = ["plan", "METHODS", "MAX_CONTROL_POINTS", "MAX_DURATION", "minimum_duration"]
 
 METHODS = tuple(m.value for m in Method)
+
+
+MAX_DURATION = 1e9
+"""[s] The longest motion planned (31 years): a longer one comes from limits that are wrong."""
+
+
+def minimum_duration(
+    robot: Robot, q0: ArrayLike, qe: ArrayLike, velocity_limits: bool = True
+) -> tuple[float, int]:
+    """A lower bound on the duration of any motion from rest at q0 to rest at qe [s], and the
+    joint that sets it: joint i moves by at least |qe_i − q0_i|, no faster than its speed limit
+    (|Δθ|/v) and, with an acceleration limit a, no sooner than 2√(|Δθ|/a) from rest to rest."""
+    lim = robot.limits
+    move = np.abs(np.asarray(qe, dtype=float) - np.asarray(q0, dtype=float))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = move / lim.velocity if velocity_limits else np.zeros_like(move)
+        accel = 2.0 * np.sqrt(move / lim.acceleration)
+    bound = np.nan_to_num(np.maximum(speed, accel), nan=0.0, posinf=np.inf)
+    joint = int(np.argmax(bound))
+    return float(bound[joint]), joint
 
 
 def plan(
@@ -248,6 +268,14 @@ def _setup(
             )
         raise ConfigurationError(
             "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
+        )
+    shortest, joint = minimum_duration(robot, q0, qe, velocity_limits)
+    if shortest > MAX_DURATION:
+        raise ConfigurationError(
+            f"joint {robot.joint_names[joint]!r} cannot move from q0 to qe in less than "
+            f"{shortest:.3g} s at its speed and acceleration limits (more than "
+            f"{MAX_DURATION:.0e} s, 31 years): are the limits meant to be that small?",
+            joint=robot.joint_names[joint],
         )
     collisions = collisions_for(robot, scene, margin, self_collision)
     if collisions is not None:

@@ -53,6 +53,10 @@ def _readonly(x: ArrayLike) -> NDArray[np.float64]:
     return a
 
 
+NO_LIMIT = 1e100
+"""A speed or acceleration limit this large is none (inf); an effort limit must be below it."""
+
+
 @dataclass(frozen=True)
 class JointLimits:
     """Per-joint limits, read-only arrays of shape (n,).
@@ -447,10 +451,20 @@ class Robot:
                 self._check_positive(e_hi, "effort limit")
                 e_lo = -e_hi
             self._check_order(e_lo, e_hi, "effort", strict=True)
+            huge = np.maximum(np.abs(e_lo), np.abs(e_hi)) >= NO_LIMIT
+            if np.any(huge):
+                i = int(np.argmax(huge))
+                raise ConfigurationError(
+                    f"effort limit of joint {self.joint_names[i]!r} is "
+                    f"{max(abs(e_lo[i]), abs(e_hi[i])):g}: an actuator's limit is below "
+                    f"{NO_LIMIT:g} N·m (or N)",
+                    joint=self.joint_names[i],
+                )
         vel = lim.velocity
         if velocity is not None:
             vel = self._joint_array(velocity, "velocity limit", allow_inf=True)
             self._check_positive(vel, "velocity limit")
+            vel = np.where(vel >= NO_LIMIT, np.inf, vel)  # none: its square would overflow
         p_lo, p_hi = lim.position_lower, lim.position_upper
         if position is not None:
             p_lo = self._joint_array(position[0], "lower position limit", allow_inf=True)
@@ -460,6 +474,7 @@ class Robot:
         if acceleration is not None:
             acc = self._joint_array(acceleration, "acceleration limit", allow_inf=True)
             self._check_positive(acc, "acceleration limit")
+            acc = np.where(acc >= NO_LIMIT, np.inf, acc)
         damp = self.damping
         if damping is not None:
             damp = self._joint_array(damping, "damping")
