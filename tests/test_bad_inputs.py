@@ -46,6 +46,7 @@ def urdf(tmp_path: Path, text: str, name: str = "bad.urdf") -> Path:
     return path
 
 
+ONE_RAD = ["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1"]  # a motion of 1 rad
 START3 = "start = [0.1, 0.2, 0.3]\n[[target]]\nq = [0.2, -0.3]\n"
 FAR_BOX = '[[obstacle]]\nname = "box"\nbox = [0.1, 0.1, 0.1]\nposition = [5.0, 5.0, 5.0]\n'
 
@@ -859,20 +860,7 @@ CASES = {
         lambda p: json_text(
             nearopt.plan(two_link().with_limits(acceleration=1e-6), (0, 0), (1, 1), grid=20)
         ),
-        lambda p: [
-            "--robot",
-            "two_link",
-            "--q0",
-            "0",
-            "0",
-            "--qe",
-            "1",
-            "1",
-            "--acceleration-limit",
-            "1e-6",
-            "--json",
-            str(p / "long.json"),
-        ],
+        lambda p: [*ONE_RAD, "--acceleration-limit", "1e-6", "--json", str(p / "long.json")],
         ConfigurationError,
         "ask for a rate of at most 555.6 Hz",
     ),
@@ -892,29 +880,14 @@ CASES = {
     ),
     "--csv over the URDF": Case(
         None,
-        lambda p: [
-            "--urdf",
-            str(write_urdf(p)),
-            "--q0",
-            "0",
-            "0",
-            "--qe",
-            "1",
-            "1",
-            "--csv",
-            str(write_urdf(p)),
-        ],
+        lambda p: ["--urdf", str(write_urdf(p)), *ONE_RAD[2:], "--csv", str(write_urdf(p))],
         ConfigurationError,
         "is the URDF of this request",
     ),
     "--json over the task file (a hard link to it)": Case(
         None,
         lambda p: [
-            "--robot",
-            "two_link",
-            "--q0",
-            "0",
-            "0",
+            *ONE_RAD[:5],
             "--task",
             str(urdf(p, "[[target]]\nq = [0.2, -0.3]\n", "t.toml")),
             "--json",
