@@ -43,10 +43,16 @@ class PathBasis(NamedTuple):
         B, B', B'' (derivatives with respect to σ) at the grid knots, each (N+1, K).
     interior
         B' at the points inside segments where speed rows lie, (P, K).
+    first, local
+        The same at the knots on the few consecutive control points whose basis is nonzero
+        there: the first one's index per knot, (N+1,), and B, B', B'' from it on, each
+        (N+1, w) (w = 4 for a cubic B-spline; zeros past the last control point).
     """
 
     knots: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
     interior: NDArray[np.float64]
+    first: NDArray[np.int64]
+    local: tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]
 
 
 def path_basis(path: BSplinePath, disc: Discretisation, end: bool = False) -> PathBasis:
@@ -57,7 +63,18 @@ def path_basis(path: BSplinePath, disc: Discretisation, end: bool = False) -> Pa
     knots = tuple(path.basis(sigma, order)[:, cols] for order in (0, 1, 2))
     inside = disc.problem.interior_speed
     at = np.zeros(0) if inside is None else inside.sigma
-    return PathBasis(knots, path.basis(at, 1)[:, cols])  # type: ignore[arg-type]
+    nonzero = (knots[0] != 0.0) | (knots[1] != 0.0) | (knots[2] != 0.0)
+    count = knots[0].shape[1]
+    first = np.where(nonzero.any(axis=1), nonzero.argmax(axis=1), 0)
+    last = np.where(nonzero.any(axis=1), count - 1 - nonzero[:, ::-1].argmax(axis=1), 0)
+    width = int(np.max(last - first + 1, initial=1))
+    take = first[:, None] + np.arange(width)[None, :]
+    inside_range = take < count
+    local = tuple(
+        np.where(inside_range, np.take_along_axis(b, np.minimum(take, count - 1), axis=1), 0.0)
+        for b in knots
+    )
+    return PathBasis(knots, path.basis(at, 1)[:, cols], first, local)  # type: ignore[arg-type]
 
 
 def row_path_jacobian(
@@ -102,9 +119,14 @@ def row_path_jacobian(
         lam[node, None, None] * du_dv + acc[:, None, None] * mass,
         b[node, None, None] * mass,
     )
-    torque = sum(np.einsum("rab,rj->arjb", d, basis.knots[o][node]) for o, d in enumerate(d_order))
-    torque = torque.reshape(n, 2 * big_n, k_count * n)
-    parts.append(sp.coo_matrix(torque.reshape(n * 2 * big_n, k_count * n)))
+    if between:  # dense: the rows between the samples interpolate it
+        torque = sum(
+            np.einsum("rab,rj->arjb", d, basis.knots[o][node]) for o, d in enumerate(d_order)
+        )
+        torque = torque.reshape(n, 2 * big_n, k_count * n)
+        parts.append(sp.coo_matrix(torque.reshape(n * 2 * big_n, k_count * n)))
+    else:  # on the control points whose basis is nonzero at each sample's knot only
+        parts.append(_local_torque(d_order, basis, node, n, k_count))
 
     def joint_rows(rows: slice, value: NDArray[np.float64], shape: NDArray[np.float64]) -> None:
         """Rows whose derivative is ``value`` × ``shape`` (a basis row) in their own joint."""
@@ -161,6 +183,30 @@ def row_path_jacobian(
         + (w * 2.0 * b[k + 1] * p.dtheta[k + 1, joint])[:, None] * basis.knots[1][k + 1],
     )
     return _stacked(parts)
+
+
+def _local_torque(
+    d_order: tuple[NDArray[np.float64], ...],
+    basis: PathBasis,
+    node: NDArray[np.int64],
+    n: int,
+    k_count: int,
+) -> sp.csr_matrix:
+    """The torque rows' derivatives (joint-major, i·2N + r) as CSR, formed on the w control
+    points whose basis is nonzero at each sample's knot: the same sums of the same products
+    as the dense form, w/K of the work."""
+    samples = node.size
+    local = [b[node] for b in basis.local]  # (2N, w) each
+    width = local[0].shape[1]
+    block = sum(np.einsum("rab,rj->arjb", d, local[o]) for o, d in enumerate(d_order))
+    point = basis.first[node][:, None] + np.arange(width)[None, :]  # (2N, w)
+    columns = (point[:, :, None] * n + np.arange(n)[None, None, :]).reshape(samples, -1)
+    keep = np.repeat(point < k_count, n, axis=1)  # past the last control point: none
+    data = block.reshape(n, samples, width * n)[:, keep]
+    indices = np.broadcast_to(columns[keep], (n, int(keep.sum())))
+    counts = np.tile(keep.sum(axis=1), n)
+    indptr = np.concatenate([[0], np.cumsum(counts)])
+    return sp.csr_matrix((data.ravel(), indices.ravel(), indptr), shape=(n * samples, k_count * n))
 
 
 def _stacked(parts: list[sp.spmatrix]) -> sp.csr_matrix:
