@@ -42,6 +42,12 @@ def test_row_path_jacobian_matches_finite_differences(name: str) -> None:
     disc = Discretisation(problem)
     z = solve_timing(problem, PAPER_COST).b[1:-1]
     jac = row_path_jacobian(robot, disc, z, path_basis(path, disc)).toarray()
+    # stage 2's form (the torque rows on the control points nonzero at each knot, no rows
+    # between the samples): the same numbers where it has rows
+    inner = row_path_jacobian(robot, disc, z, path_basis(path, disc), between=False).toarray()
+    tail = disc.blocks.torque_between.start
+    np.testing.assert_array_equal(inner[:tail], jac[:tail])
+    assert not inner[tail:].any()
     h = 1e-6
     for column in (0, 7, jac.shape[1] - 1):
         j, i = divmod(column, robot.n)
