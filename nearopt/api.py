@@ -221,6 +221,14 @@ class PlanRequest:
             raise ConfigurationError(f"--margin must be a distance ≥ 0 [m], got {self.margin}")
         if self.margin is not None and not self.scene and not self.self_collision:
             raise ConfigurationError("--margin applies with --scene or --self-collision")
+        if self.no_velocity_limits and (
+            self.velocity_limit is not None or self.velocity_scale is not None
+        ):
+            given = "--velocity-limit" if self.velocity_limit is not None else "--velocity-scale"
+            raise ConfigurationError(
+                f"--no-velocity-limits turns off the speed limits that {given} sets: give one "
+                "of them"
+            )
 
     def _check_arm(self) -> None:
         for option in ("lock", "tip", "base", "lock_at"):
@@ -441,11 +449,41 @@ class Prepared:
             "the scene": request.scene,
         }
         out = {what: Path(path) for what, path in files.items() if path is not None}
+        for k, mesh in enumerate(_urdf_meshes(self.robot)):
+            out[f"a mesh of the URDF ({mesh.name})" if k else "a mesh of the URDF"] = mesh
         if self.scene is not None:
             for obstacle in self.scene.obstacles:
                 if isinstance(obstacle.shape, Mesh):
                     out[f"the mesh of obstacle {obstacle.name!r}"] = Path(obstacle.shape.path)
         return out
+
+
+def _urdf_meshes(robot: Robot) -> list[Path]:
+    """The mesh files a robot's URDF names (``<mesh filename=…>``: relative to the URDF's folder,
+    ``file://`` or ``package://`` in the known robots' folders), those that exist."""
+    import xml.etree.ElementTree as ET
+
+    from .catalog import package_dirs
+
+    if robot.urdf_xml is None:
+        return []
+    try:
+        root = ET.fromstring(robot.urdf_xml)
+    except ET.ParseError:
+        return []
+    folder = Path(robot.urdf_path).parent if robot.urdf_path is not None else Path.cwd()
+    found: dict[Path, None] = {}
+    for mesh in root.iter("mesh"):
+        name = mesh.get("filename") or ""
+        if name.startswith("package://"):
+            candidates = [base / name.removeprefix("package://") for base in package_dirs()]
+        else:
+            candidates = [folder / name.removeprefix("file://")]
+        for path in candidates:
+            if path.is_file():
+                found[path] = None
+                break
+    return list(found)
 
 
 @dataclass(frozen=True)
@@ -478,6 +516,11 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
     NearoptError
         On anything the request gets wrong (naming the option, joint, value and limit).
     """
+    if not isinstance(request, PlanRequest):
+        raise ConfigurationError(
+            f"a request is a PlanRequest (PlanRequest.from_mapping(options) for a dict), got "
+            f"{type(request).__name__} {request!r:.60}"
+        )
     request.check()
     robot = _robot(request, robot_loader)
     if request.weights is not None and len(request.weights) != robot.n:
@@ -634,6 +677,11 @@ def _robot(request: PlanRequest, loader: RobotLoader | None = None) -> Robot:
     single_effort = limit[0] if limit and len(limit) == 1 else None
 
     def load() -> Robot:
+        if request.robot is not None and not isinstance(request.robot, str):
+            raise ConfigurationError(
+                f"robot is a known arm's name (e.g. 'panda'; a URDF goes in urdf=PATH), got "
+                f"{type(request.robot).__name__} {request.robot!r:.60}"
+            )
         if request.robot:
             return Robot.from_name(
                 request.robot, **({"srdf": request.srdf} if request.srdf else {})

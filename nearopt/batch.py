@@ -40,7 +40,7 @@ import threading
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field, fields, replace
 from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -110,7 +110,12 @@ class MotionRequest:
         if not isinstance(data, Mapping):
             raise ConfigurationError(f"a motion is a JSON object, got {data!r:.80}")
         motion_id = data.get("id", default_id)
-        if not isinstance(motion_id, str) or not _ID.fullmatch(motion_id):
+        if not isinstance(motion_id, str):
+            raise ConfigurationError(
+                f'motion id {motion_id!r}: an id is a JSON string, e.g. "{motion_id}" (it '
+                "names the output files)"
+            )
+        if not _ID.fullmatch(motion_id):
             raise ConfigurationError(
                 f"motion id {motion_id!r}: ids are 1-128 letters, digits, '.', '_' or '-', "
                 "starting with a letter or digit (they name the output files)"
@@ -159,6 +164,17 @@ def _plain(value: object) -> object:
     if isinstance(value, tuple | list):
         return [_plain(v) for v in value]
     return value
+
+
+def _no_repeated_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
+    """A JSON object whose keys are all different (an option given twice is an error, as on
+    the command line)."""
+    out: dict[str, Any] = {}
+    for key, value in pairs:
+        if key in out:
+            raise ConfigurationError(f"option {key!r} is given twice")
+        out[key] = value
+    return out
 
 
 def _is_json(value: object) -> bool:
@@ -480,7 +496,8 @@ def probe_scheduler(address: str, wait: float = PROBE_SECONDS) -> None:
     ``host:port``; other protocols are left to Dask), within ``wait`` seconds twice at most.
 
     A scheduler speaks first: on a new connection it sends its handshake, a message whose
-    first 8 bytes are its length. Anything else is named: nothing listening, no answer, an
+    first 8 bytes are its length (over tcp://; over tls://, ws:// and wss:// the connection
+    alone is checked). Anything else is named: nothing listening, no answer, an
     HTTP server (the dashboard, port 8787, is the commonest slip), another kind of server.
 
     Raises
@@ -490,8 +507,11 @@ def probe_scheduler(address: str, wait: float = PROBE_SECONDS) -> None:
     """
     text = str(address)
     scheme, _, rest = text.rpartition("://")
-    if scheme not in ("", "tcp"):
-        return
+    if scheme not in ("", "tcp", "tls", "ws", "wss"):
+        raise ConfigurationError(
+            f"--scheduler {text}: {scheme}:// is not a Dask protocol; a scheduler's address is "
+            "tcp://HOST:8786 (or tls://, ws://, wss://)"
+        )
     host, colon, port = rest.rpartition(":")
     if not colon or not port.isdigit() or not 0 < int(port) < 65536:
         raise ConfigurationError(
@@ -505,6 +525,8 @@ def probe_scheduler(address: str, wait: float = PROBE_SECONDS) -> None:
     except OSError as exc:
         raise ConfigurationError(f"cannot connect to {where}: {exc.strerror or exc}") from None
     with sock:
+        if scheme not in ("", "tcp"):  # encrypted or framed: Dask's own handshake decides
+            return
         greeting = _received(sock, 8, wait)
         if len(greeting) == 8 and struct.unpack("<Q", greeting)[0] < 2**24:
             return  # a Dask message: its length, then the handshake
@@ -639,9 +661,11 @@ def read_requests(path: str | Path) -> list[MotionRequest]:
         if not line.strip() or line.lstrip().startswith("#"):
             continue
         try:
-            data = json.loads(line)
+            data = json.loads(line, object_pairs_hook=_no_repeated_keys)
         except json.JSONDecodeError as exc:
             raise ConfigurationError(f"{path}, line {number}: not JSON ({exc})") from None
+        except ConfigurationError as exc:  # a repeated key
+            raise ConfigurationError(f"{path}, line {number}: {exc}") from None
         try:
             request = MotionRequest.from_dict(data, f"line{number}", path.parent)
         except ConfigurationError as exc:
@@ -657,9 +681,21 @@ def read_requests(path: str | Path) -> list[MotionRequest]:
     return requests
 
 
-def _requests(requests: Iterable[MotionRequest | Mapping[str, Any]]) -> list[MotionRequest]:
+def _requests(
+    requests: Iterable[MotionRequest | PlanRequest | Mapping[str, Any]],
+) -> list[MotionRequest]:
+    if isinstance(requests, Mapping | MotionRequest | PlanRequest | str):
+        raise ConfigurationError(
+            f"give a list of motions (one {type(requests).__name__} is one motion: [motion])"
+        )
     out, seen = [], set()
     for k, r in enumerate(requests):
+        if isinstance(r, PlanRequest):  # the one request model: its options, defaults left out
+            r = {
+                f.name: getattr(r, f.name)
+                for f in fields(PlanRequest)
+                if getattr(r, f.name) != f.default
+            }
         request = r if isinstance(r, MotionRequest) else MotionRequest.from_dict(r, f"m{k}")
         if request.id in seen:
             raise ConfigurationError(f"motion id {request.id!r} appears twice")
@@ -685,7 +721,7 @@ def _pool(client: object | None, workers: int | None) -> Pool:
 
 
 def plan_many(
-    requests: Iterable[MotionRequest | Mapping[str, Any]],
+    requests: Iterable[MotionRequest | PlanRequest | Mapping[str, Any]],
     client: object | None = None,
     *,
     workers: int | None = None,
@@ -696,8 +732,9 @@ def plan_many(
     Parameters
     ----------
     requests
-        :class:`MotionRequest` records, or dicts of ``id`` (default ``m<k>``) and the options of
-        ``nearopt plan`` (see the module docstring; relative paths from the working folder).
+        :class:`MotionRequest` records, :class:`~nearopt.api.PlanRequest` records (ids
+        ``m<k>``), or dicts of ``id`` (default ``m<k>``) and the options of ``nearopt plan``
+        (see the module docstring; relative paths from the working folder).
     client
         None: this machine's cores (:class:`LocalPool`); a ``distributed.Client`` or a scheduler
         address: that cluster (:class:`DaskPool`); or a :class:`Pool`.
@@ -777,6 +814,29 @@ def run_batch(
     check_rate(rate)
     if isinstance(client, str):  # a scheduler that is not there is said before anything is made
         probe_scheduler(client)
+    # a cluster is reached before anything is made; this machine's pool starts when needed
+    cluster = None if client is None or isinstance(client, Pool) else _pool(client, workers)
+    try:
+        return _run_batch(
+            requests, out, client if cluster is None else cluster, workers, rate, retry_failed,
+            progress, t0,
+        )  # fmt: skip
+    finally:
+        if cluster is not None:
+            cluster.close()
+
+
+def _run_batch(
+    requests: Sequence[MotionRequest],
+    out: str | Path,
+    client: object | None,
+    workers: int | None,
+    rate: float,
+    retry_failed: bool,
+    progress: Callable[[int, int, int, int, float], None] | None,
+    t0: float,
+) -> BatchSummary:
+    """:func:`run_batch` once the pool is known (``client``: None or a :class:`Pool`)."""
     folder = make_folder(out, "the motions")
     _refuse_inputs(folder, requests)
     outcomes: dict[str, MotionOutcome] = {}
@@ -845,9 +905,13 @@ def _refuse_inputs(folder: Path, requests: list[MotionRequest]) -> None:
         for output in (summary, _file(folder, request.id, True), _file(folder, request.id, False)):
             for what, path in inputs.items():
                 if _same_file(output, path):
+                    fix = (
+                        "give --out another folder"
+                        if output == summary
+                        else "give --out another folder or the motion another id"
+                    )
                     raise ConfigurationError(
-                        f"motion {request.id!r}: its output {output} is {what} ({path}); "
-                        "give --out another folder or the motion another id"
+                        f"motion {request.id!r}: its output {output} is {what} ({path}); {fix}"
                     )
 
 

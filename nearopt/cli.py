@@ -411,6 +411,9 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
 def _check_output_places(args: argparse.Namespace) -> tuple[dict[str, Output], Path | None]:
     """Every output place, checked before planning (a bad path costs no planning time); the
     figures' folder."""
+    for key in ("json", "csv", "html", "plots"):  # an unset variable in a script: say so
+        if getattr(args, key) == "":
+            raise ConfigurationError(f"--{key} is an empty path")
     if args.plots:
         try:
             import matplotlib  # noqa: F401

@@ -91,6 +91,8 @@ def resolve_output(target: str | Path) -> Output:
         Naming the path and why it cannot be written.
     """
     name = str(target)
+    if name == "":
+        raise ConfigurationError("an output path is empty")
     if name == "-":
         info = os.fstat(sys.stdout.fileno())
         return Output(name, OutputKind.STDOUT, None, (info.st_dev, info.st_ino))
@@ -320,6 +322,8 @@ def make_folder(folder: str | Path, what: str) -> Path:
     ConfigurationError
         If it is a file or cannot be made (``what`` names it in the message, e.g. "figures").
     """
+    if str(folder) == "":
+        raise ConfigurationError(f"the folder for {what} is an empty path")
     path = Path(folder).expanduser()
     if path.exists() and not path.is_dir():
         raise ConfigurationError(f"cannot write {what} into {folder}: it is not a folder")

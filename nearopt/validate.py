@@ -7,7 +7,7 @@ import numpy as np
 
 from .errors import ConfigurationError
 
-__all__ = ["MAX_RATE", "MAX_SAMPLES", "check_rate", "check_robot", "check_samples"]
+__all__ = ["MAX_RATE", "MAX_SAMPLES", "check_plan", "check_rate", "check_robot", "check_samples"]
 
 MAX_RATE = 1e6
 """[Hz] A sampling or controller rate above a megahertz is a mistake, not a controller."""
@@ -64,4 +64,28 @@ def check_robot(robot: object, what: str = "robot") -> None:
         raise ConfigurationError(
             f"{what} must be a nearopt.Robot (e.g. Robot.from_name('two_link') or "
             f"Robot.from_urdf(path)), got {type(robot).__name__} {robot!r:.60}"
+        )
+
+
+def check_plan(result: object, what: str = "result") -> None:
+    """That ``result`` is a plan (a :class:`~nearopt.PlanResult` or
+    :class:`~nearopt.TaskResult`).
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the argument and what it got (a motion alone: what to pass instead).
+    """
+    from .planning import PlanResult, TaskResult
+
+    if not isinstance(result, PlanResult | TaskResult):
+        hint = (
+            ": a motion alone is not enough, pass the plan it belongs to (what nearopt.plan or "
+            "plan_task returned)"
+            if hasattr(result, "states")
+            else ""
+        )
+        raise ConfigurationError(
+            f"{what} must be a plan (a PlanResult or TaskResult), got {type(result).__name__}"
+            + hint
         )

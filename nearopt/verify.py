@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import ConfigurationError, VerificationError
-from .validate import check_rate
+from .validate import check_plan, check_rate
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -235,6 +235,7 @@ def verify(
     """
     rate = check_rate(rate, "the controller rate")
     _check_motion(trajectory, robot)
+    _check_extras(robot, cost, J, collisions)
     tol = Tolerances(
         torque_tolerance,
         limit_tolerance,
@@ -324,6 +325,39 @@ def _check_motion(trajectory: object, robot: object) -> None:
         )
 
 
+def _check_extras(robot: Robot, cost: object, J: object, collisions: object) -> None:  # noqa: N803
+    """That J comes with its cost (and is a number), and collisions is this robot's model.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the argument and what to pass.
+    """
+    from .collision import CollisionModel
+    from .cost import check_cost
+
+    if J is not None:
+        if cost is None:
+            raise ConfigurationError(
+                "J is checked against ∫ f0 dt of its cost: pass cost= too (result.cost)"
+            )
+        if isinstance(J, bool) or not isinstance(J, int | float | np.integer | np.floating):
+            raise ConfigurationError(f"J must be a number, got {type(J).__name__} {J!r:.40}")
+    if cost is not None:
+        check_cost(cost)
+    if collisions is not None:
+        if not isinstance(collisions, CollisionModel):
+            raise ConfigurationError(
+                "collisions must be a CollisionModel (a plan's result.collisions, or "
+                f"CollisionModel(robot, scene)), got {type(collisions).__name__}"
+            )
+        if collisions.robot.name != robot.name or collisions.robot.n != robot.n:
+            raise ConfigurationError(
+                f"the collision model was built for {collisions.robot.name}, not for "
+                f"{robot.name}: pass the model of the plan being verified"
+            )
+
+
 def verify_plan(
     plan: Planned,
     *,
@@ -355,11 +389,7 @@ def verify_plan(
     ConfigurationError
         As :func:`verify`.
     """
-    if not all(hasattr(plan, name) for name in ("trajectory", "robot", "J", "cost")):
-        raise ConfigurationError(
-            f"verify_plan checks a plan (a PlanResult or TaskResult), got "
-            f"{type(plan).__name__} {plan!r:.60}; a motion alone: verify(motion, robot)"
-        )
+    check_plan(plan, "verify_plan's plan")
     return verify(
         plan.trajectory,
         plan.robot,

@@ -20,10 +20,14 @@ from nearopt import (
     InfeasiblePathError,
     NearoptError,
     RobotNotFoundError,
+    SceneError,
     URDFError,
 )
+from nearopt.api import PlanRequest, run
+from nearopt.collision import Sphere
 from nearopt.export import json_text, write_json
 from nearopt.paper_example import THETA_0, THETA_E
+from nearopt.viz import export_html
 from nearopt.viz.figures import save_figures
 
 WEAK = '<limit effort="1" velocity="2" lower="-3" upper="3"/>'  # gravity needs ≈ 3.9 N·m at 1.5 rad
@@ -49,6 +53,19 @@ def urdf(tmp_path: Path, text: str, name: str = "bad.urdf") -> Path:
 ONE_RAD = ["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1"]  # a motion of 1 rad
 START3 = "start = [0.1, 0.2, 0.3]\n[[target]]\nq = [0.2, -0.3]\n"
 FAR_BOX = '[[obstacle]]\nname = "box"\nbox = [0.1, 0.1, 0.1]\nposition = [5.0, 5.0, 5.0]\n'
+
+
+def urdf_with_mesh(tmp_path: Path) -> Path:
+    """The chain of :func:`write_urdf` whose link b is drawn by a mesh file next to it."""
+    import trimesh
+
+    trimesh.creation.box((0.05, 0.05, 0.05)).export(tmp_path / "part.stl")
+    path = write_urdf(tmp_path)
+    visual = '<visual><geometry><mesh filename="part.stl"/></geometry></visual>'
+    text = path.read_text()
+    head, tail = text.split('<link name="b">', 1)
+    path.write_text(f'{head}<link name="b">{visual}{tail}')
+    return path
 
 
 def hard_link(target: Path, link: Path) -> Path:
@@ -819,6 +836,110 @@ CASES = {
         lambda p: ["--robot", "two_link", *PAPER, "--velocity-limit", "1e-300"],
         ConfigurationError,
         "e+300 s",  # how long it would take, at least
+    ),
+    # ------------------------------------------------------------ a new user's pass (helper)
+    "verify with a Scene as collisions": Case(
+        lambda p: nearopt.verify(plan(*GOOD).trajectory, two_link(), collisions=nearopt.Scene(())),
+        None,
+        ConfigurationError,
+        "collisions must be a CollisionModel (a plan's result.collisions",
+    ),
+    "verify with J but no cost": Case(
+        lambda p: nearopt.verify(plan(*GOOD).trajectory, two_link(), J=0.1),
+        None,
+        ConfigurationError,
+        "pass cost= too",
+    ),
+    "verify with J as a string": Case(
+        lambda p: nearopt.verify(
+            plan(*GOOD).trajectory, two_link(), cost=nearopt.TimeCost(), J="0.1"
+        ),
+        None,
+        ConfigurationError,
+        "J must be a number",
+    ),
+    "api.run with a dict": Case(
+        lambda p: run({"robot": "two_link", "q0": [0, 0], "qe": [0.5, 0.3]}),
+        None,
+        ConfigurationError,
+        "a request is a PlanRequest (PlanRequest.from_mapping",
+    ),
+    "export_html with a motion, not a plan": Case(
+        lambda p: export_html(plan(*GOOD).trajectory, p / "x.html"),
+        None,
+        ConfigurationError,
+        "a motion alone is not enough",
+    ),
+    "a Robot object as PlanRequest.robot": Case(
+        lambda p: run(PlanRequest(robot=two_link(), q0=(0, 0), qe=(0.5, 0.3))),
+        None,
+        ConfigurationError,
+        "robot is a known arm's name",
+    ),
+    "plan_many with one dict (not a list)": Case(
+        lambda p: nearopt.plan_many({"robot": "two_link", "q0": [0, 0], "qe": [1, 1]}),
+        None,
+        ConfigurationError,
+        "give a list of motions",
+    ),
+    "timing a path that does not move": Case(
+        lambda p: nearopt.optimal_timing(two_link(), nearopt.StraightPath([0, 0], [0, 0])),
+        None,
+        ConfigurationError,
+        "the path does not move",
+    ),
+    "--no-velocity-limits with --velocity-limit": Case(
+        None,
+        lambda p: [*ONE_RAD, "--no-velocity-limits", "--velocity-limit", "1"],
+        ConfigurationError,
+        "--no-velocity-limits turns off the speed limits that --velocity-limit sets",
+    ),
+    "a last target passed through (stop = false)": Case(
+        None,
+        lambda p: [
+            *ONE_RAD[:5],
+            "--task",
+            str(urdf(p, "[[target]]\nq = [0.5, 0.3]\nstop = false\n", "t.toml")),
+        ],
+        ConfigurationError,
+        "is the last: the motion ends there at rest",
+    ),
+    "--json with an empty path": Case(
+        None, lambda p: [*ONE_RAD, "--json", ""], ConfigurationError, "--json is an empty path"
+    ),
+    "a scene mesh that is not a mesh": Case(
+        None,
+        lambda p: [
+            "--robot",
+            "ur5",
+            *("--q0", "0", "-1.2", "1.2", "-1.5", "-1.57", "0"),
+            *("--qe", "0.3", "-1.2", "1.2", "-1.5", "-1.57", "0"),
+            "--scene",
+            str(urdf(p, '[[obstacle]]\nname = "m"\nmesh = "cell.toml"\n', "cell.toml")),
+        ],
+        SceneError,
+        "cell.toml: obstacle 'm': cannot load the mesh",
+    ),
+    "an obstacle named like a link": Case(
+        lambda p: nearopt.CollisionModel(
+            load("ur5"),
+            nearopt.Scene((nearopt.Obstacle("shoulder_link", Sphere(0.05), (2, 2, 2)),)),
+        ),
+        None,
+        SceneError,
+        "has the name of a link of ur5",
+    ),
+    "--html over a mesh of the URDF": Case(
+        None,
+        lambda p: [
+            "--urdf",
+            str(urdf_with_mesh(p)),
+            *ONE_RAD[2:],
+            "--html",
+            str(p / "part.stl"),
+        ],
+        ConfigurationError,
+        "part.stl is a mesh of the URDF of this request",
     ),
     # ------------------------------------------------------------ command line and outputs
     "--json into a folder that does not exist (a trailing slash)": Case(

@@ -339,6 +339,8 @@ def test_bad_motion_files_are_one_line_errors(tmp_path: Path) -> None:
         "[1, 2]\n": "a motion is a JSON object",
         "{oops\n": "line 1: not JSON",
         '{"id": "abc\\n", "robot": "two_link"}\n': "ids are",  # a newline in a file name
+        '{"id": 7, "robot": "two_link"}\n': "an id is a JSON string",
+        '{"id": "a", "q0": [0, 0], "q0": [0.1, 0]}\n': "line 1: option 'q0' is given twice",
         "\n# nothing\n": "no motions",
     }
     for text, message in cases.items():
@@ -444,6 +446,14 @@ def test_a_batch_never_writes_over_its_inputs(tmp_path: Path) -> None:
             tmp_path / "out",
         )
     assert task.read_text() == "[[target]]\nq = [0.2, -0.3]\n"
+    table = tmp_path / "s" / "summary.csv"  # a motions file named like the summary
+    table.parent.mkdir()
+    table.write_text(text + "\n")
+    only_folder = "is the motions file .*; give --out another folder$"  # an id cannot help
+    with pytest.raises(nearopt.ConfigurationError, match=only_folder):
+        run_batch(read_requests(table), table.parent)
+    with pytest.raises(nearopt.ConfigurationError, match="is an empty path"):
+        run_batch(read_requests(motions), "")
 
 
 def test_a_scheduler_address_that_is_not_a_scheduler_is_named_at_once(tmp_path: Path) -> None:
@@ -475,6 +485,7 @@ def test_a_scheduler_address_that_is_not_a_scheduler_is_named_at_once(tmp_path: 
         f"127.0.0.1:{http_server.server_address[1]}": "is an HTTP server, not a Dask scheduler",
         f"tcp://127.0.0.1:{greeter.getsockname()[1]}": "not as a Dask scheduler (it sent b'SSH",
         "tcp://127.0.0.1": "give the scheduler's host and port",
+        "http://127.0.0.1:9": "http:// is not a Dask protocol",
     }
     try:
         for address, says in cases.items():

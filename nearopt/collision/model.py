@@ -166,13 +166,29 @@ class CollisionModel:
         for obj in geom.geometryObjects:
             obj.geometry = _convex(obj.geometry, obj.name)
         for ob in self.scene.obstacles:
-            shape = _coal_shape(ob.shape, ob.name)
+            try:
+                shape = _coal_shape(ob.shape, ob.name)
+            except SceneError as exc:  # which file it came from
+                if self.scene.source is None:
+                    raise
+                raise SceneError(
+                    f"{self.scene.source}: {exc}", obstacle=ob.name, field="mesh"
+                ) from None
             placement = pin.SE3(ob.rotation(), np.asarray(ob.position, dtype=float))
             geom.addGeometryObject(
                 pin.GeometryObject(f"obstacle:{ob.name}", 0, 0, placement, shape)
             )
         self.geometry = geom
         self._names = [self._body(i) for i in range(geom.ngeoms)]
+        links = set(self._names[: self._robot_geoms])
+        for ob in self.scene.obstacles:
+            if ob.name in links:
+                raise SceneError(
+                    f"obstacle {ob.name!r} has the name of a link of {robot.name}: a contact "
+                    "between them could not be told apart; rename the obstacle",
+                    obstacle=ob.name,
+                    field="name",
+                )
         self._joint = np.array([o.parentJoint for o in geom.geometryObjects], dtype=int)
         srdf_path = robot.srdf if srdf is None else Path(srdf).expanduser().resolve()
         disabled = _srdf_disabled(srdf_path) if srdf_path is not None else set()
@@ -528,6 +544,19 @@ def _convex(geometry: coal.CollisionGeometry, name: str) -> coal.CollisionGeomet
     return coal.Convex.convexHull(list(points[hull.vertices]), False, None)
 
 
+def _loader_reason(exc: Exception) -> str:
+    """What a mesh loader's error says, without its C++ file and function (assimp via coal)."""
+    text = " ".join(str(exc).split())
+    reason = text.rsplit(" in function: ", 1)[-1]
+    reason = reason.split(")", 1)[-1] if reason != text else reason
+    reason = reason.split(" Hint:", 1)[0].strip(" :")
+    if "No suitable reader" in text:
+        return "not a mesh file coal's loader reads (STL, OBJ, DAE, …)"
+    if "File is empty" in text:
+        return "the file is empty"
+    return reason or text
+
+
 def _coal_shape(shape: object, name: str) -> coal.CollisionGeometry:
     if isinstance(shape, Box):
         return coal.Box(*shape.size)
@@ -544,7 +573,7 @@ def _coal_shape(shape: object, name: str) -> coal.CollisionGeometry:
             bvh = coal.MeshLoader().load(str(shape.path), np.full(3, shape.scale))
         except (RuntimeError, ValueError) as exc:
             raise SceneError(
-                f"obstacle {name!r}: cannot load the mesh {shape.path}: {exc}",
+                f"obstacle {name!r}: cannot load the mesh {shape.path}: {_loader_reason(exc)}",
                 obstacle=name,
                 field="mesh",
             ) from None

@@ -64,7 +64,7 @@ class Target:
         kinematics from the previous target).
     stop
         The arm comes to rest there (a segment ends); False: it passes through without stopping.
-        The last target of a task is always a stop.
+        The last target of a task is always a stop (False there is refused).
     name
         A label for reports and files (default ``target <k>``, from 1).
     """
@@ -610,6 +610,10 @@ def _targets(targets: Sequence[Target | ArrayLike | ToolPose]) -> tuple[Target, 
                 f"target {k}: name must be a non-empty string, got {target.name!r}"
             )
         name = target.name or f"target {k}"
-        last = k == len(targets)
-        out.append(Target(target.goal, bool(target.stop) or last, name))
+        if k == len(targets) and not target.stop:
+            raise ConfigurationError(
+                f"target {k} ({name}) is the last: the motion ends there at rest, so it cannot "
+                "be passed through (stop = false); remove stop = false, or add a target after it"
+            )
+        out.append(Target(target.goal, bool(target.stop), name))
     return tuple(out)

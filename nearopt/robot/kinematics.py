@@ -49,7 +49,9 @@ class ToolPose:
         p = _floats(self.position, 3, "a tool position is 3 finite numbers [m]")
         object.__setattr__(self, "position", tuple(float(x) for x in p))
         if self.quaternion is not None:
-            message = "a tool orientation is a non-zero quaternion (qx, qy, qz, qw)"
+            message = (
+                "a tool orientation is a non-zero quaternion of 4 finite numbers (qx, qy, qz, qw)"
+            )
             q = _floats(self.quaternion, 4, message)
             q = q / np.max(np.abs(q)) if np.any(q != 0.0) else q  # no overflow in the norm
             if np.linalg.norm(q) < 1e-9:

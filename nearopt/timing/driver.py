@@ -135,6 +135,10 @@ def optimal_timing(
             f"with s_end, dof and __call__(s, order) — got {type(path).__name__} {path!r:.60}"
         )
     problem = build_timing_problem(robot, path, grid=grid, velocity_limits=velocity_limits)
+    if not np.any(problem.dtheta):
+        raise ConfigurationError(
+            "the path does not move (θ' = 0 all along it, e.g. θ0 = θe): there is nothing to time"
+        )
     if margins is not None and margins.sigma.size == problem.sigma.size:
         problem = inherit_margins(problem, margins)
     try:

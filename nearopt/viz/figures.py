@@ -21,6 +21,7 @@ import numpy as np
 
 from ..outputs import make_folder, write_atomically
 from ..planning import Plan, TaskResult
+from ..validate import check_plan
 from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:
@@ -379,6 +380,7 @@ def plot_history(
 def render_figures(result: Plan, reference: dict[int, float] | None = None) -> dict[str, bytes]:
     """torques.png, speeds.png (accelerations.png if the robot has acceleration limits),
     workspace.png and history.png of a plan, as PNG bytes by file name."""
+    check_plan(result)
     plt = _pyplot()
     robot, traj = result.robot, result.trajectory
     figures = {
@@ -414,6 +416,7 @@ def save_figures(
     ConfigurationError
         If ``folder`` is a file or cannot be made.
     """
+    check_plan(result)  # before the folder is made
     folder = make_folder(folder, "figures")
     return [
         write_atomically(folder / name, png)

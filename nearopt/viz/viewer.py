@@ -43,6 +43,7 @@ from ..collision.scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sp
 from ..errors import ConfigurationError, NearoptError
 from ..outputs import write_atomically
 from ..robot.kinematics import ToolPose
+from ..validate import check_plan
 from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:
@@ -448,6 +449,7 @@ def export_html(result: PlanResult | TaskResult, path: str | Path, fps: float = 
 
 def plan_html(result: PlanResult | TaskResult, fps: float = 60.0) -> str:
     """:func:`scene_html` of a plan, with the first path's tip trail and the obstacles."""
+    check_plan(result)
     return scene_html(
         result.robot,
         result.trajectory,
@@ -545,6 +547,7 @@ def show(
     LiveViewer
         The running server (``.url``); call ``close()`` to stop it.
     """
+    check_plan(result)
     viewer = LiveViewer()
     try:
         _draw(
