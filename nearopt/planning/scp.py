@@ -617,7 +617,7 @@ def _model(
     path_factor = np.ones(value.size)
     for block in (disc.blocks.speed, disc.blocks.interior_speed):
         index = np.arange(block.start, block.stop)
-        slope2 = np.asarray(disc.matrix[index].sum(axis=1)).ravel()  # θ'_i² (weights sum to 1)
+        slope2 = disc.coef_left[index] + disc.coef_right[index]  # θ'_i² (weights sum to 1)
         moving = (slope2 > 0.0) & (value[index] > 0.0)
         keep[index[~moving]] = False
         factor[index[moving]] = 1.0 / slope2[moving]
