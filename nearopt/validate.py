@@ -7,7 +7,7 @@ import numpy as np
 
 from .errors import ConfigurationError
 
-__all__ = ["MAX_RATE", "MAX_SAMPLES", "check_plan", "check_rate", "check_robot", "check_samples"]
+__all__ = ["MAX_RATE", "MAX_SAMPLES", "check_rate", "check_samples"]
 
 MAX_RATE = 1e6
 """[Hz] A sampling or controller rate above a megahertz is a mistake, not a controller."""
@@ -47,45 +47,4 @@ def check_samples(rate: float, duration: float, what: str = "rate", at_least: bo
             f"the motion {lasts} {duration:.4g} s{days}: {what} {rate:g} Hz over it gives more "
             f"than {MAX_SAMPLES:.0e} samples to check; ask for a lower rate, or raise the limits "
             "that make it this slow"
-        )
-
-
-def check_robot(robot: object, what: str = "robot") -> None:
-    """That ``robot`` is a :class:`~nearopt.Robot`.
-
-    Raises
-    ------
-    ConfigurationError
-        Naming the argument and what it got.
-    """
-    from .robot import Robot
-
-    if not isinstance(robot, Robot):
-        raise ConfigurationError(
-            f"{what} must be a nearopt.Robot (e.g. Robot.from_name('two_link') or "
-            f"Robot.from_urdf(path)), got {type(robot).__name__} {robot!r:.60}"
-        )
-
-
-def check_plan(result: object, what: str = "result") -> None:
-    """That ``result`` is a plan (a :class:`~nearopt.PlanResult` or
-    :class:`~nearopt.TaskResult`).
-
-    Raises
-    ------
-    ConfigurationError
-        Naming the argument and what it got (a motion alone: what to pass instead).
-    """
-    from .planning import PlanResult, TaskResult
-
-    if not isinstance(result, PlanResult | TaskResult):
-        hint = (
-            ": a motion alone is not enough, pass the plan it belongs to (what nearopt.plan or "
-            "plan_task returned)"
-            if hasattr(result, "states")
-            else ""
-        )
-        raise ConfigurationError(
-            f"{what} must be a plan (a PlanResult or TaskResult), got {type(result).__name__}"
-            + hint
         )

@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import ConfigurationError, VerificationError
-from .validate import check_plan, check_rate
+from .validate import check_rate
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -389,7 +389,11 @@ def verify_plan(
     ConfigurationError
         As :func:`verify`.
     """
-    check_plan(plan, "verify_plan's plan")
+    if not all(hasattr(plan, name) for name in ("trajectory", "robot", "J", "cost", "goal")):
+        raise ConfigurationError(  # (the planning layer is above this one: duck-typed)
+            f"verify_plan checks a plan (a PlanResult or TaskResult), got "
+            f"{type(plan).__name__} {plan!r:.60}; a motion alone: verify(motion, robot)"
+        )
     return verify(
         plan.trajectory,
         plan.robot,

@@ -22,9 +22,10 @@ from .records import (
     StopReason,
 )
 from .scp import sequential_convex
-from .task import Target, Task, TaskResult, plan_task
+from .task import Target, Task, TaskResult, check_plan, plan_task
 
 __all__ = [
+    "check_plan",
     "plan",
     "plan_task",
     "Target",

@@ -50,7 +50,7 @@ from .records import Iteration, PlanResult, PlanSettings, StopReason
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Target", "Task", "TaskResult", "plan_task", "check_targets"]
+__all__ = ["Target", "Task", "TaskResult", "plan_task", "check_targets", "check_plan"]
 
 
 @dataclass(frozen=True)
@@ -617,3 +617,24 @@ def _targets(targets: Sequence[Target | ArrayLike | ToolPose]) -> tuple[Target, 
             )
         out.append(Target(target.goal, bool(target.stop), name))
     return tuple(out)
+
+
+def check_plan(result: object, what: str = "result") -> None:
+    """That ``result`` is a plan (a :class:`~nearopt.PlanResult` or :class:`TaskResult`).
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the argument and what it got (a motion alone: what to pass instead).
+    """
+    if not isinstance(result, PlanResult | TaskResult):
+        hint = (
+            ": a motion alone is not enough, pass the plan it belongs to (what nearopt.plan or "
+            "plan_task returned)"
+            if hasattr(result, "states")
+            else ""
+        )
+        raise ConfigurationError(
+            f"{what} must be a plan (a PlanResult or TaskResult), got {type(result).__name__}"
+            + hint
+        )

@@ -6,6 +6,6 @@ eq. 10, the limits as :class:`JointLimits`; the only maker of Pinocchio's work s
 ``kinematics`` (tool poses, inverse kinematics).
 """
 
-from .dynamics import JointLimits, PathCoefficients, Robot
+from .dynamics import NO_LIMIT, JointLimits, PathCoefficients, Robot, check_robot
 
-__all__ = ["Robot", "JointLimits", "PathCoefficients"]
+__all__ = ["Robot", "JointLimits", "PathCoefficients", "NO_LIMIT", "check_robot"]

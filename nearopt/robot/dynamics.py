@@ -33,7 +33,7 @@ from .urdf import read_urdf
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
-__all__ = ["Robot", "JointLimits", "PathCoefficients"]
+__all__ = ["Robot", "JointLimits", "PathCoefficients", "NO_LIMIT", "check_robot"]
 
 _ONE_DOF_JOINTS = (
     "JointModelRX",
@@ -54,7 +54,8 @@ def _readonly(x: ArrayLike) -> NDArray[np.float64]:
 
 
 NO_LIMIT = 1e100
-"""A speed or acceleration limit this large is none (inf); an effort limit must be below it."""
+"""A speed or acceleration limit this large is none (inf); a larger effort limit is taken as this
+(it cannot bind, and its square would overflow)."""
 
 
 @dataclass(frozen=True)
@@ -451,15 +452,8 @@ class Robot:
                 self._check_positive(e_hi, "effort limit")
                 e_lo = -e_hi
             self._check_order(e_lo, e_hi, "effort", strict=True)
-            huge = np.maximum(np.abs(e_lo), np.abs(e_hi)) >= NO_LIMIT
-            if np.any(huge):
-                i = int(np.argmax(huge))
-                raise ConfigurationError(
-                    f"effort limit of joint {self.joint_names[i]!r} is "
-                    f"{max(abs(e_lo[i]), abs(e_hi[i])):g}: an actuator's limit is below "
-                    f"{NO_LIMIT:g} N·m (or N)",
-                    joint=self.joint_names[i],
-                )
+            # beyond NO_LIMIT an effort limit cannot bind: taken as NO_LIMIT (no overflow)
+            e_lo, e_hi = np.maximum(e_lo, -NO_LIMIT), np.minimum(e_hi, NO_LIMIT)
         vel = lim.velocity
         if velocity is not None:
             vel = self._joint_array(velocity, "velocity limit", allow_inf=True)
@@ -939,3 +933,18 @@ def _default_tip(model: pin.Model) -> str:
     body = pin.FrameType.BODY
     bodies = [f.name for f in model.frames if f.type == body and f.parentJoint == last]
     return bodies[-1] if bodies else model.frames[-1].name
+
+
+def check_robot(robot: object, what: str = "robot") -> None:
+    """That ``robot`` is a :class:`Robot`.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the argument and what it got.
+    """
+    if not isinstance(robot, Robot):
+        raise ConfigurationError(
+            f"{what} must be a nearopt.Robot (e.g. Robot.from_name('two_link') or "
+            f"Robot.from_urdf(path)), got {type(robot).__name__} {robot!r:.60}"
+        )

@@ -17,7 +17,7 @@ import numpy as np
 import pinocchio as pin
 
 from ..errors import ConfigurationError, UnreachablePoseError
-from ..validate import check_robot
+from .dynamics import check_robot
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray

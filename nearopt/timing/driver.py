@@ -12,8 +12,8 @@ import numpy as np
 from ..cost import Cost, TimeCost, check_cost
 from ..errors import ConfigurationError, SolverError
 from ..path import Path
+from ..robot import check_robot
 from ..trajectory import Trajectory
-from ..validate import check_robot
 from .between import BetweenSamples, inherit_margins, tighten, uniform_slow_down
 from .problem import build_timing_problem
 from .solvers import TimingMethod, TimingSolution, TimingStatus, out_of_time, solve_timing

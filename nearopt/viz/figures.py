@@ -20,8 +20,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..outputs import make_folder, write_atomically
-from ..planning import Plan, TaskResult
-from ..validate import check_plan
+from ..planning import Plan, TaskResult, check_plan
 from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:

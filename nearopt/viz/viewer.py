@@ -42,8 +42,8 @@ from pinocchio.visualize.meshcat_visualizer import loadPrimitive as load_primiti
 from ..collision.scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sphere
 from ..errors import ConfigurationError, NearoptError
 from ..outputs import write_atomically
+from ..planning import check_plan
 from ..robot.kinematics import ToolPose
-from ..validate import check_plan
 from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:
