@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import json
 import math
+import os
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields, replace
@@ -155,6 +156,54 @@ class PlanRequest:
     self_collision: bool | None = None
     rate: float = 1000.0
 
+    def _check_kinds(self) -> None:
+        """Each field of the kind its annotation says (a request made in Python is not parsed
+        as the command line's is): numbers, lists of numbers, via-points as lists of lists,
+        names as strings."""
+
+        def number(x: object) -> bool:
+            return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)
+
+        for f in fields(self):
+            value, kind = getattr(self, f.name), str(f.type)
+            if value is None or (not isinstance(value, np.ndarray) and value == f.default):
+                continue
+            if f.name in FILE_FIELDS and isinstance(value, os.PathLike):  # a Path: its text
+                object.__setattr__(self, f.name, os.fspath(value))
+                continue
+            if f.name == "via":
+                good = isinstance(value, tuple | list) and all(
+                    isinstance(v, tuple | list) and all(number(x) for x in v) for v in value
+                )
+                wants = "a list of via-points, each a list of joint values"
+            elif "tuple[float" in kind:
+                good = isinstance(value, tuple | list) and all(number(x) for x in value)
+                wants = "a list of numbers"
+            elif "tuple[str" in kind:
+                good = isinstance(value, tuple | list) and all(isinstance(x, str) for x in value)
+                wants = "a list of names"
+            elif kind.startswith("float"):
+                good, wants = number(value), "a number"
+            elif kind.startswith("int"):
+                good = number(value) and isinstance(value, int | np.integer)
+                wants = "an integer"
+            elif kind.startswith("str"):
+                good = isinstance(value, str)
+                wants = (
+                    "a known arm's name (e.g. 'panda'; a URDF goes in urdf=PATH)"
+                    if f.name == "robot"
+                    else "a string"
+                )
+            elif kind.startswith("bool"):
+                good = isinstance(value, bool)
+                wants = "true or false"
+            else:
+                continue
+            if not good:
+                raise ConfigurationError(
+                    f"option {f.name!r} is {wants}, got {type(value).__name__} {value!r:.60}"
+                )
+
     @classmethod
     def from_mapping(cls, mapping: Mapping[str, Any]) -> PlanRequest:
         """A request from a dict of options (a motion of a batch): JSON values, a flag ``true``,
@@ -199,6 +248,7 @@ class PlanRequest:
         ConfigurationError
             Naming the option and the value.
         """
+        self._check_kinds()
         if (self.robot is None) == (self.urdf is None):
             raise ConfigurationError(
                 "give the arm as robot (a known name) or as urdf (a file), once"
@@ -548,7 +598,8 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
         check_targets(robot, task.targets, q0, where=str(task.source))  # type: ignore[union-attr]
     scene = Scene.from_file(request.scene) if request.scene is not None else None
     via = [_joint_values(v, request.deg) for v in request.via]
-    if isinstance(qe, np.ndarray) and qe.shape == q0.shape:  # too slow to check: said now
+    whole = (robot.n,)
+    if isinstance(qe, np.ndarray) and qe.shape == whole and q0.shape == whole:  # too slow: now
         shortest = minimum_duration(robot, q0, qe, not request.no_velocity_limits)[0]
         check_samples(request.rate, shortest, "--rate", at_least=True)
     return Prepared(request, robot, q0, qe, task, scene, request.cost(), via)
@@ -677,11 +728,6 @@ def _robot(request: PlanRequest, loader: RobotLoader | None = None) -> Robot:
     single_effort = limit[0] if limit and len(limit) == 1 else None
 
     def load() -> Robot:
-        if request.robot is not None and not isinstance(request.robot, str):
-            raise ConfigurationError(
-                f"robot is a known arm's name (e.g. 'panda'; a URDF goes in urdf=PATH), got "
-                f"{type(request.robot).__name__} {request.robot!r:.60}"
-            )
         if request.robot:
             return Robot.from_name(
                 request.robot, **({"srdf": request.srdf} if request.srdf else {})

@@ -285,8 +285,12 @@ def plan_request(
                     },
                 },
             )
-    except (NearoptError, OSError) as exc:
-        error = f"{type(exc).__name__}: {' '.join(str(exc).split())}"
+    except (NearoptError, OSError, ArithmeticError, LookupError, TypeError, ValueError) as exc:
+        # a nearopt error says what is wrong; anything else is a defect of nearopt's, recorded
+        # against its motion (the batch goes on) rather than ending the batch with a traceback
+        ours = isinstance(exc, NearoptError | OSError)
+        prefix = "" if ours else "internal error, please report: "
+        error = f"{prefix}{type(exc).__name__}: {' '.join(str(exc).split())}"
         wall = time.perf_counter() - t0
         document = json.dumps(
             {

@@ -19,6 +19,7 @@ from __future__ import annotations
 
 import argparse
 import contextlib
+import math
 import re
 import signal
 import sys
@@ -463,7 +464,9 @@ def _print_summary(result: PlanResult | TaskResult, out: TextIO) -> None:
             f"{result.wall_time:.2f} s ({result.message})",
             file=out,
         )
-    if result.clearance is not None:
+    if result.clearance is not None and not math.isfinite(result.clearance.closest.distance):
+        print("clearance: no pairs of bodies to check (the scene and the arm are apart)", file=out)
+    elif result.clearance is not None:
         c = result.clearance
         print(
             f"clearance: closest {c.closest.pair} {c.closest.distance * 1e3:.1f} mm "

@@ -206,6 +206,11 @@ class CallableCost:
 
 def check_cost(cost: object) -> Cost:
     """``cost`` if it is a nearopt cost, else a ConfigurationError saying what is expected."""
+    if isinstance(cost, type):
+        raise ConfigurationError(
+            f"cost is a nearopt cost object, got the class {cost.__name__}: call it, e.g. "
+            "TimeCost() or TorqueCost(0.001)"
+        )
     if not isinstance(cost, TorqueCost | CallableCost) and not isinstance(cost, Cost):
         raise ConfigurationError(
             f"cost must be a nearopt cost — TimeCost(), TorqueCost(beta) or CallableCost(f0) "

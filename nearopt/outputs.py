@@ -266,6 +266,7 @@ def write_outputs(contents: dict[Output, str | bytes]) -> list[str]:
                 raise ConfigurationError(
                     f"cannot write {output.name}: {exc.strerror or exc}"
                 ) from None
+        broken = False  # the standard output's reader went away: the files are still written
         for output, content in data.items():
             if output.kind is OutputKind.FILE:
                 continue
@@ -277,6 +278,10 @@ def write_outputs(contents: dict[Output, str | bytes]) -> list[str]:
                 else:
                     with open(output.path, "wb") as handle:
                         handle.write(content)
+            except BrokenPipeError:
+                if not is_standard_output(output):
+                    raise ConfigurationError(f"cannot write {output.name}: broken pipe") from None
+                broken = True
             except OSError as exc:
                 raise ConfigurationError(
                     f"cannot write {output.name}: {exc.strerror or exc}"
@@ -288,6 +293,8 @@ def write_outputs(contents: dict[Output, str | bytes]) -> list[str]:
     with _no_interrupts():  # all renames or none, even on Ctrl-C
         for tmp, output in staged:
             os.replace(tmp, output.path)
+    if broken:  # ended quietly by the caller (the POSIX way: 141)
+        raise BrokenPipeError("the standard output's reader went away")
     return [output.name for output in data]
 
 

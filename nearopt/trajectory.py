@@ -64,6 +64,17 @@ def segment_times(s: ArrayLike, b: ArrayLike) -> NDArray[np.float64]:
     return 2.0 * np.diff(np.asarray(s, dtype=float)) / (lam[:-1] + lam[1:])
 
 
+def _times(t: ArrayLike) -> NDArray[np.float64]:
+    """Times asked of a motion [s]: numbers, not NaN (a time outside [0, t_e] is clamped)."""
+    try:
+        times = np.asarray(t, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigurationError(f"times are numbers of seconds, got {t!r:.60}") from None
+    if np.any(np.isnan(times)):
+        raise ConfigurationError(f"a time is NaN: {t!r:.60}")
+    return times
+
+
 class Motion:
     """What every timed motion offers on top of :meth:`states`, :attr:`t` (the times where the
     acceleration may jump) and :attr:`duration`: values at times, torques, samples at a rate, its
@@ -84,13 +95,13 @@ class Motion:
 
     def __call__(self, t: ArrayLike, order: Literal[0, 1, 2] = 0) -> NDArray[np.float64]:
         """θ(t) (order 0), θ̇(t) (1) or θ̈(t) (2), shape (M, n); at a knot, the segment after it."""
-        if order not in (0, 1, 2):
-            raise ValueError(f"order must be 0, 1 or 2, got {order}")
-        return self.states(t)[order]
+        if isinstance(order, bool) or order not in (0, 1, 2):
+            raise ConfigurationError(f"order must be 0, 1 or 2, got {order!r}")
+        return self.states(_times(t))[order]
 
     def torque(self, t: ArrayLike) -> NDArray[np.float64]:
         """u(t) by inverse dynamics (eq. 1) [N·m or N], shape (M, n)."""
-        return self._inverse_dynamics(*self.states(t))
+        return self._inverse_dynamics(*self.states(_times(t)))
 
     def sample(self, rate: float) -> Samples:
         """Samples at ``rate`` [Hz] from 0 to t_e inclusive (the last step shorter).

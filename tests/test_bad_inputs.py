@@ -874,7 +874,7 @@ CASES = {
         lambda p: run(PlanRequest(robot=two_link(), q0=(0, 0), qe=(0.5, 0.3))),
         None,
         ConfigurationError,
-        "robot is a known arm's name",
+        "option 'robot' is a known arm's name",
     ),
     "plan_many with one dict (not a list)": Case(
         lambda p: nearopt.plan_many({"robot": "two_link", "q0": [0, 0], "qe": [1, 1]}),
@@ -940,6 +940,63 @@ CASES = {
         ],
         ConfigurationError,
         "part.stl is a mesh of the URDF of this request",
+    ),
+    # ------------------------------------------------------------ the re-check pass (helper)
+    "q0 and qe of the same wrong length": Case(
+        lambda p: run(PlanRequest(robot="two_link", q0=(0, 0, 0), qe=(0.5, 0.3, 0.1))),
+        lambda p: ["--robot", "two_link", "--q0", "0", "0", "0", "--qe", "0.5", "0.3", "0.1"],
+        ConfigurationError,
+        "q0 must have 2 values",
+    ),
+    "the cost class instead of a cost": Case(
+        lambda p: plan(*GOOD, nearopt.TorqueCost),
+        None,
+        ConfigurationError,
+        "got the class TorqueCost: call it",
+    ),
+    "a single number as a configuration": Case(
+        lambda p: plan(0.3, THETA_E), None, ConfigurationError, "got the single number 0.3"
+    ),
+    "a flat via list in a PlanRequest": Case(
+        lambda p: run(PlanRequest(robot="two_link", q0=(0, 0), qe=(0.5, 0.3), via=(0.2, 0.1))),
+        None,
+        ConfigurationError,
+        "option 'via' is a list of via-points",
+    ),
+    "a string as PlanRequest.q0": Case(
+        lambda p: run(PlanRequest(robot="two_link", q0="0 0", qe=(0.5, 0.3))),
+        None,
+        ConfigurationError,
+        "option 'q0' is a list of numbers",
+    ),
+    "a number as PlanRequest.effort_limit": Case(
+        lambda p: run(PlanRequest(robot="two_link", q0=(0, 0), qe=(0.5, 0.3), effort_limit=3)),
+        None,
+        ConfigurationError,
+        "option 'effort_limit' is a list of numbers",
+    ),
+    "a string as PlanRequest.lock": Case(
+        lambda p: run(PlanRequest(robot="two_link", q0=(0, 0), qe=(0.5, 0.3), lock="gripper")),
+        None,
+        ConfigurationError,
+        "option 'lock' is a list of names",
+    ),
+    "a robot's name as CollisionModel's robot": Case(
+        lambda p: nearopt.CollisionModel("ur5", nearopt.Scene(())),
+        None,
+        ConfigurationError,
+        "robot must be a nearopt.Robot",
+    ),
+    "no inverse-kinematics attempts": Case(
+        lambda p: nearopt.inverse_kinematics(
+            load("ur5"), nearopt.ToolPose((0.5, 0.2, 0.3)), attempts=0
+        ),
+        None,
+        ConfigurationError,
+        "attempts must be a positive integer",
+    ),
+    "a motion asked at a time that is not a number": Case(
+        lambda p: plan(*GOOD).trajectory("a"), None, ConfigurationError, "times are numbers"
     ),
     # ------------------------------------------------------------ command line and outputs
     "--json into a folder that does not exist (a trailing slash)": Case(

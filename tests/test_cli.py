@@ -373,20 +373,24 @@ def test_a_reader_that_goes_away_ends_quietly(tmp_path: Path) -> None:
     """``nearopt plan … | head -1``: the lines after the first are dropped, the plan's file is
     still written, exit 0 and no "Broken pipe"; a record to a pipe closed before it was read
     ends quietly: 141 (128 + SIGPIPE, as POSIX tools do) when the write saw the pipe closed,
-    0 when the pipe took it all first."""
+    0 when the pipe took it all first; the other outputs are written all the same."""
     command = f"{sys.executable} -m nearopt.cli"
     out = tmp_path / "plan.json"
     script = (
         f"{command} plan {' '.join(PAPER_ARGS)} --max-iterations 3 --json {out} | head -1; "
         f"echo status ${{PIPESTATUS[0]}}; "
         f"{command} plan {' '.join(PAPER_ARGS)} --quiet --max-iterations 1 --rate 10000 "
-        "--json - | head -c 10; echo; echo status ${PIPESTATUS[0]}"
+        "--json - | head -c 10; echo; echo status ${PIPESTATUS[0]}; "
+        f"{command} plan {' '.join(PAPER_ARGS)} --quiet --max-iterations 1 --rate 10000 "
+        f"--json - --csv {tmp_path / 'kept.csv'} | true; echo status ${{PIPESTATUS[0]}}"
     )
     done = subprocess.run(
         ["bash", "-c", script], capture_output=True, text=True, timeout=600, cwd=tmp_path
     )
     statuses = [line.split()[1] for line in done.stdout.splitlines() if line.startswith("status")]
     assert statuses[0] == "0" and statuses[1] in ("0", "141"), (done.stdout, done.stderr)
+    assert statuses[2] == "141", (done.stdout, done.stderr)  # 300 kB into a closed pipe
+    assert (tmp_path / "kept.csv").read_text().startswith("t,")  # the files are still written
     assert "Broken pipe" not in done.stderr and "Traceback" not in done.stderr, done.stderr
     assert json.loads(out.read_text())["robot"] == "two_link"
 

@@ -45,6 +45,7 @@ from scipy.spatial import ConvexHull, QhullError
 
 from ..errors import CollisionError, ConfigurationError, SceneError, URDFError
 from ..path import BSplinePath, SplinePath, StraightPath
+from ..robot import check_robot
 from .scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sphere
 
 if TYPE_CHECKING:
@@ -151,6 +152,7 @@ class CollisionModel:
         margin: float | None = None,
         self_collision: bool = True,
     ) -> None:
+        check_robot(robot)
         self._arguments = (robot, scene, srdf, margin, self_collision)
         self.robot = robot
         self.scene = Scene() if scene is None else scene
@@ -258,7 +260,11 @@ class CollisionModel:
         c = self.closest(q)
         if c.distance < self.margin:
             state = (
-                f"penetrates by {-c.distance * 1e3:.1f} mm"
+                (
+                    f"penetrates by {-c.distance * 1e3:.1f} mm"
+                    if np.isfinite(c.distance)
+                    else "penetrates deeply (beyond what coal's depth search resolves)"
+                )
                 if c.distance < 0
                 else f"is {c.distance * 1e3:.1f} mm apart, closer than the margin "
                 f"{self.margin * 1e3:.1f} mm"

@@ -398,7 +398,16 @@ def plan_task(
             f"settings must be a nearopt.PlanSettings, got {type(settings).__name__} "
             f"{settings!r:.60}"
         )
-    records = _targets(targets.targets if isinstance(targets, Task) else targets)
+    try:
+        records = _targets(targets.targets if isinstance(targets, Task) else targets)
+    except ConfigurationError as exc:  # a task file's: named
+        if not isinstance(targets, Task) or targets.source is None:
+            raise
+        raise ConfigurationError(f"{targets.source}: {exc}") from None
+    if callback is not None and not callable(callback):
+        raise ConfigurationError(
+            f"callback must be a function of (segment, Iteration), got {type(callback).__name__}"
+        )
     what = "q0"
     if q0 is None and isinstance(targets, Task) and targets.start is not None:
         q0 = targets.start

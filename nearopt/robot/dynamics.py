@@ -19,6 +19,7 @@ joint damping, so Dθ̇ is added here, to the derivatives too.
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import TYPE_CHECKING, NamedTuple
@@ -296,6 +297,8 @@ class Robot:
         ConfigurationError
             A ``lock_at`` joint that is not locked, or a value outside its limits.
         """
+        if not isinstance(path, str | os.PathLike) or not str(path):
+            raise URDFError(f"a URDF is given by its file's path, got {path!r:.60}")
         path = Path(path).expanduser().resolve()
         if group is not None and srdf is None:
             raise ConfigurationError("a group needs its SRDF (srdf=...): the group is read from it")
@@ -809,7 +812,13 @@ class Robot:
 
     # ------------------------------------------------------------------ checks
     def check_configuration(self, q: ArrayLike, what: str = "configuration") -> NDArray[np.float64]:
-        """Return q as a float array of shape (n,), or raise a :class:`ConfigurationError`."""
+        """Return q as a float array of shape (n,), or raise a :class:`ConfigurationError` (a
+        single number is refused: a configuration has a value per joint)."""
+        if self.n > 1 and np.ndim(q) == 0 and q is not None and not isinstance(q, str):
+            raise ConfigurationError(
+                f"{what} must have {self.n} values (one per joint of {self.name}: "
+                f"{', '.join(self.joint_names)}), got the single number {q!r}"
+            )
         return self._joint_array(q, what)
 
     def _joint_array(

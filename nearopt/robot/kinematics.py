@@ -140,6 +140,9 @@ def inverse_kinematics(
         An unknown frame (the message lists the frames).
     """
     check_robot(robot)
+    for name, value in (("attempts", attempts), ("iterations", iterations)):
+        if isinstance(value, bool) or not isinstance(value, int) or value < 1:
+            raise ConfigurationError(f"{name} must be a positive integer, got {value!r}")
     if not isinstance(pose, ToolPose):
         raise ConfigurationError(
             f"pose must be a nearopt.ToolPose (position [m], optional quaternion, frame), got "
