@@ -816,9 +816,8 @@ def run_batch(
     """
     t0 = time.perf_counter()
     check_rate(rate)
-    if isinstance(client, str):  # a scheduler that is not there is said before anything is made
-        probe_scheduler(client)
-    # a cluster is reached before anything is made; this machine's pool starts when needed
+    # a cluster is reached (and its address probed, DaskPool) before anything is made; this
+    # machine's pool starts when needed
     cluster = None if client is None or isinstance(client, Pool) else _pool(client, workers)
     try:
         return _run_batch(

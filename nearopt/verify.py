@@ -300,13 +300,10 @@ def _check_motion(trajectory: object, robot: object) -> None:
     ConfigurationError
         Naming the argument, what it is and what to pass instead.
     """
-    from .robot import Robot
+    from .robot import check_robot
     from .trajectory import Motion
 
-    if not isinstance(robot, Robot):
-        raise ConfigurationError(
-            f"robot must be a nearopt.Robot, got {type(robot).__name__} {robot!r:.60}"
-        )
+    check_robot(robot)
     if not isinstance(trajectory, Motion):
         hint = (
             ": pass its motion, result.trajectory, or verify_plan(result), which knows q0, qe "
