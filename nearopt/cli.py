@@ -639,7 +639,11 @@ def main(argv: Sequence[str] | None = None) -> int:
             return 0
         if args.command == "batch":
             return _batch_command(args)
-        return _plan_command(args, interrupt)
+        try:
+            return _plan_command(args, interrupt)
+        except Exception:  # after a library swallowed the second Ctrl-C's abort (trimesh
+            interrupt.abort_if_second()  # catches BaseException) and then failed on half a result
+            raise
     except BrokenPipeError:  # what went to the standard output lost its reader (`| head`):
         quiet_standard_output()  # end quietly, as a POSIX tool killed by SIGPIPE
         return 128 + signal.SIGPIPE
