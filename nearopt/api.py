@@ -156,6 +156,19 @@ class PlanRequest:
     self_collision: bool | None = None
     rate: float = 1000.0
 
+    def __post_init__(self) -> None:
+        """A file given as a ``Path`` is kept as its text, arrays as (nested) tuples of their
+        values: a request compares, copies and travels to a worker as plain data."""
+        for f in fields(self):
+            value = getattr(self, f.name)
+            if f.name in FILE_FIELDS and isinstance(value, os.PathLike):
+                object.__setattr__(self, f.name, os.fspath(value))
+            elif isinstance(value, np.ndarray):
+                plain = value.tolist()
+                if isinstance(plain, list):
+                    plain = tuple(tuple(v) if isinstance(v, list) else v for v in plain)
+                object.__setattr__(self, f.name, plain)
+
     def _check_kinds(self) -> None:
         """Each field of the kind its annotation says (a request made in Python is not parsed
         as the command line's is): numbers, lists of numbers, via-points as lists of lists,
@@ -166,10 +179,7 @@ class PlanRequest:
 
         for f in fields(self):
             value, kind = getattr(self, f.name), str(f.type)
-            if value is None or (not isinstance(value, np.ndarray) and value == f.default):
-                continue
-            if f.name in FILE_FIELDS and isinstance(value, os.PathLike):  # a Path: its text
-                object.__setattr__(self, f.name, os.fspath(value))
+            if value is None or value == f.default:
                 continue
             if f.name == "via":
                 good = isinstance(value, tuple | list) and all(

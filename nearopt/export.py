@@ -19,6 +19,7 @@ from .errors import ConfigurationError, SamplingWarning
 from .outputs import write_atomically
 from .planning import Plan, TaskResult
 from .robot.kinematics import ToolPose
+from .validate import check_rate
 
 __all__ = [
     "MAX_VALUES",
@@ -46,8 +47,10 @@ def check_record(result: Plan, rate: float) -> int:
     Raises
     ------
     ConfigurationError
-        Saying the duration, the samples and the highest rate within the cap.
+        Saying the duration, the samples and the highest rate within the cap; a rate that is
+        not a positive finite number up to :data:`~nearopt.validate.MAX_RATE`.
     """
+    rate = check_rate(rate)
     duration, n = result.duration, result.robot.n
     samples = int(np.floor(duration * rate + 1e-9)) + 2
     per_sample = 1 + len(KEYS) * n

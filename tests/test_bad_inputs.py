@@ -1042,6 +1042,12 @@ CASES = {
         ConfigurationError,
         "ask for a rate of at most 555.6 Hz",
     ),
+    "a record at a rate of NaN": Case(
+        lambda p: json_text(nearopt.plan(two_link(), (0, 0), (1, 1), max_iterations=0), np.nan),
+        None,
+        ConfigurationError,
+        "rate must be a number of Hz in (0, 1e+06], got nan",
+    ),
     "--json over the scene file": Case(
         None,
         lambda p: [

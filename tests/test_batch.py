@@ -310,8 +310,17 @@ def test_plan_many_returns_the_plans_in_request_order() -> None:
         for qe in ([-1.5, 0.0], (0.3, 0.2), np.array([1.0, -0.5]))
     ]
     records.insert(1, {"id": "wrong", "robot": "two_link", "q0": [0, 0], "qe": [1, 2, 3]})
-    request = PlanRequest(robot="two_link", q0=(0.7, -1.5), qe=(0.2, 0.1), max_iterations=1)
-    outcomes = plan_many([*records, request], workers=2)  # the one request model too
+    # the one request model too, with arrays as a script holds them and the URDF as a Path
+    request = PlanRequest(
+        urdf=nearopt.catalog.robot_entry("two_link").urdf,
+        q0=np.array([0.7, -1.5]),
+        qe=np.array([0.2, 0.1]),
+        max_iterations=np.int64(1),
+    )
+    assert request == PlanRequest(
+        urdf=str(request.urdf), q0=(0.7, -1.5), qe=(0.2, 0.1), max_iterations=1
+    )
+    outcomes = plan_many([*records, request], workers=2)
     assert [o.id for o in outcomes] == ["m0", "wrong", "m2", "m3", "m4"]
     last = outcomes.pop()
     assert last.status == OutcomeStatus.PLANNED and last.te > 0, last.error
