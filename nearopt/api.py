@@ -509,8 +509,9 @@ class Prepared:
             "the scene": request.scene,
         }
         out = {what: Path(path) for what, path in files.items() if path is not None}
-        for k, mesh in enumerate(_urdf_meshes(self.robot)):
-            out[f"a mesh of the URDF ({mesh.name})" if k else "a mesh of the URDF"] = mesh
+        for mesh in _urdf_meshes(self.robot):  # by its name, or its path where names repeat
+            what = f"a mesh of the URDF ({mesh.name})"
+            out[f"a mesh of the URDF ({mesh})" if what in out else what] = mesh
         if self.scene is not None:
             for obstacle in self.scene.obstacles:
                 if isinstance(obstacle.shape, Mesh):

@@ -387,17 +387,30 @@ def check_main_guard() -> None:
     except (OSError, SyntaxError, ValueError):
         return
     line = frame.f_lineno
-    for node in tree.body:
-        if (
+    for node in ast.walk(tree):  # a guard anywhere (in a try, a with; `"__main__" == __name__`,
+        if (  # `__name__ == "__main__" and …`), the call in its body
             isinstance(node, ast.If)
-            and ast.unparse(node.test).replace("'", '"') == '__name__ == "__main__"'
-            and node.lineno <= line <= (node.end_lineno or node.lineno)
+            and _tests_main(node.test)
+            and node.body[0].lineno <= line <= (node.body[-1].end_lineno or node.lineno)
         ):
             return
     raise ConfigurationError(
         f"{script}, line {line}: plan_many and run_batch start worker processes that import "
         'this script again; put the call under `if __name__ == "__main__":` (see the README)'
     )
+
+
+def _tests_main(test: ast.expr) -> bool:
+    """Whether an ``if`` test compares ``__name__`` with ``"__main__"`` (in either order, alone or
+    in a larger condition)."""
+    for node in ast.walk(test):
+        if isinstance(node, ast.Compare) and all(isinstance(op, ast.Eq) for op in node.ops):
+            sides = [node.left, *node.comparators]
+            if any(isinstance(s, ast.Name) and s.id == "__name__" for s in sides) and any(
+                isinstance(s, ast.Constant) and s.value == "__main__" for s in sides
+            ):
+                return True
+    return False
 
 
 class LocalPool(Pool):
@@ -497,7 +510,8 @@ PROBE_SECONDS = 3.0
 
 def probe_scheduler(address: str, wait: float = PROBE_SECONDS) -> None:
     """Check that a Dask scheduler answers at ``address`` (``tcp://host:port`` or
-    ``host:port``; other protocols are left to Dask), within ``wait`` seconds twice at most.
+    ``host:port``; inproc:// and ucx:// are left to Dask), within ``wait`` seconds twice at
+    most.
 
     A scheduler speaks first: on a new connection it sends its handshake, a message whose
     first 8 bytes are its length (over tcp://; over tls://, ws:// and wss:// the connection
@@ -511,10 +525,12 @@ def probe_scheduler(address: str, wait: float = PROBE_SECONDS) -> None:
     """
     text = str(address)
     scheme, _, rest = text.rpartition("://")
+    if scheme in ("inproc", "ucx", "ucxx"):  # no socket to probe: Dask's own connection decides
+        return
     if scheme not in ("", "tcp", "tls", "ws", "wss"):
         raise ConfigurationError(
             f"--scheduler {text}: {scheme}:// is not a Dask protocol; a scheduler's address is "
-            "tcp://HOST:8786 (or tls://, ws://, wss://)"
+            "tcp://HOST:8786 (or tls://, ws://, wss://, inproc://, ucx://)"
         )
     host, colon, port = rest.rpartition(":")
     if not colon or not port.isdigit() or not 0 < int(port) < 65536:
@@ -819,6 +835,8 @@ def run_batch(
     # a cluster is reached (and its address probed, DaskPool) before anything is made; this
     # machine's pool starts when needed
     cluster = None if client is None or isinstance(client, Pool) else _pool(client, workers)
+    if client is None:  # this machine's pool: a script without a main guard makes nothing
+        check_main_guard()
     try:
         return _run_batch(
             requests, out, client if cluster is None else cluster, workers, rate, retry_failed,

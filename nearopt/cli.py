@@ -454,10 +454,12 @@ def _print_summary(result: PlanResult | TaskResult, out: TextIO) -> None:
     else:
         if isinstance(result.initial.trajectory.path, StraightPath):
             first = "straight line"
+        elif result.via:  # the spline through them (around the obstacles where it collides)
+            first = "first path, through the via-points"
         elif result.clearance is not None:  # around the obstacles
             first = "first path, from OMPL"
         else:
-            first = "first path, through the via-points"
+            first = "first path"
         print(
             f"{result.status}: J = {result.J:.6f} ({first} {result.initial.J:.6f}), "
             f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "

@@ -386,7 +386,10 @@ def verify_plan(
     ConfigurationError
         As :func:`verify`.
     """
-    if not all(hasattr(plan, name) for name in ("trajectory", "robot", "J", "cost", "goal")):
+    if not all(
+        hasattr(plan, name)
+        for name in ("trajectory", "robot", "J", "cost", "goal", "collisions", "waypoints")
+    ):
         raise ConfigurationError(  # (the planning layer is above this one: duck-typed)
             f"verify_plan checks a plan (a PlanResult or TaskResult), got "
             f"{type(plan).__name__} {plan!r:.60}; a motion alone: verify(motion, robot)"

@@ -68,6 +68,23 @@ def urdf_with_mesh(tmp_path: Path) -> Path:
     return path
 
 
+def urdf_with_meshes_of_one_name(tmp_path: Path) -> Path:
+    """The chain of :func:`write_urdf` drawn by three files of the same name in three folders
+    (link a: x/part.stl; link b: y/part.stl and z/part.stl)."""
+    import trimesh
+
+    path = write_urdf(tmp_path)
+    text = path.read_text()
+    for link, folder in (("a", "x"), ("b", "y"), ("b", "z")):
+        (tmp_path / folder).mkdir()
+        trimesh.creation.box((0.05, 0.05, 0.05)).export(tmp_path / folder / "part.stl")
+        visual = f'<visual><geometry><mesh filename="{folder}/part.stl"/></geometry></visual>'
+        head, tail = text.split(f'<link name="{link}">', 1)
+        text = f'{head}<link name="{link}">{visual}{tail}'
+    path.write_text(text)
+    return path
+
+
 def hard_link(target: Path, link: Path) -> Path:
     link.hardlink_to(target)
     return link
@@ -939,7 +956,19 @@ CASES = {
             str(p / "part.stl"),
         ],
         ConfigurationError,
-        "part.stl is a mesh of the URDF of this request",
+        "part.stl is a mesh of the URDF (part.stl) of this request",
+    ),
+    "--csv over one of three meshes of the same name": Case(
+        None,
+        lambda p: [
+            "--urdf",
+            str(urdf_with_meshes_of_one_name(p)),
+            *ONE_RAD[2:],
+            "--csv",
+            str(p / "z" / "part.stl"),
+        ],
+        ConfigurationError,
+        "z/part.stl is a mesh of the URDF",
     ),
     # ------------------------------------------------------------ the re-check pass (helper)
     "q0 and qe of the same wrong length": Case(

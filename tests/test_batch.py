@@ -532,3 +532,49 @@ def test_plan_many_at_a_scripts_top_level_asks_for_the_main_guard(tmp_path: Path
         assert run.returncode != 0
         assert f"{script}, line {line}: plan_many and run_batch start worker" in run.stderr
         assert 'if __name__ == "__main__":' in run.stderr and "WorkerDied" not in run.stderr
+
+
+def test_the_main_guard_is_found_in_any_form_and_run_batch_asks_before_its_folder(
+    tmp_path: Path,
+) -> None:
+    """A guard written the other way round, in a larger condition or inside a ``try`` is a guard
+    (the plans run); run_batch without one makes no folder."""
+    motions = '[{"robot": "two_link", "q0": [0, 0], "qe": [0.3, 0.3], "stage1_only": True}]'
+    guarded = tmp_path / "guarded.py"
+    guarded.write_text(
+        f"import nearopt\nM = {motions}\n"
+        'if "__main__" == __name__:\n    a = nearopt.plan_many(M, workers=1)\n'
+        'try:\n    if __name__ == "__main__" and M:\n        b = nearopt.plan_many(M, workers=1)\n'
+        "finally:\n    pass\n"
+        'if __name__ == "__main__":\n    print(a[0].status.value, b[0].status.value)\n'
+    )
+    run = subprocess.run(
+        [sys.executable, str(guarded)], capture_output=True, text=True, timeout=120
+    )
+    assert run.returncode == 0, run.stderr
+    assert run.stdout.split() == ["planned", "planned"]
+    bare = tmp_path / "bare.py"
+    out = tmp_path / "out"
+    bare.write_text(
+        "from nearopt.batch import MotionRequest, run_batch\n"
+        f"run_batch([MotionRequest.from_dict({motions}[0], 'm0')], {str(out)!r})\n"
+    )
+    run = subprocess.run([sys.executable, str(bare)], capture_output=True, text=True, timeout=120)
+    assert f"{bare}, line 2: plan_many and run_batch start worker" in run.stderr
+    assert not out.exists()
+
+
+def test_an_in_process_scheduler_address_is_left_to_dask() -> None:
+    """inproc:// (a cluster of threads in this process) has no socket to probe: Dask connects."""
+    import distributed
+
+    with distributed.LocalCluster(
+        processes=False, n_workers=1, threads_per_worker=1, dashboard_address=None
+    ) as cluster:
+        assert cluster.scheduler_address.startswith("inproc://")
+        (outcome,) = plan_many(
+            [{"robot": "two_link", "q0": [0, 0], "qe": [0.3, 0.3], "stage1_only": True}],
+            client=cluster.scheduler_address,
+        )
+    assert outcome.status == OutcomeStatus.PLANNED, outcome.error
+    np.testing.assert_allclose(outcome.result.trajectory(outcome.te, 0)[0], [0.3, 0.3], atol=1e-9)

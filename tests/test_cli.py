@@ -401,3 +401,12 @@ def test_the_summary_names_where_the_first_path_came_from(tmp_path: Path) -> Non
     assert done.returncode == 0, done.stderr
     assert "(first path, through the via-points" in done.stdout, done.stdout
     assert "OMPL" not in done.stdout
+    # with a scene the via path is clear of: the same first path (OMPL only where it collides)
+    scene = tmp_path / "scene.toml"
+    scene.write_text('[[obstacle]]\nname = "box"\nbox = [0.1, 0.1, 0.1]\nposition = [5, 5, 5]\n')
+    done = run_cli(
+        "plan", *PAPER_ARGS, "--via", "0", "-45", "--scene", str(scene), "--max-iterations", "1"
+    )
+    assert done.returncode == 0, done.stderr
+    assert "(first path, through the via-points" in done.stdout, done.stdout
+    assert "OMPL" not in done.stdout
