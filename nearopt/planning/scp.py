@@ -341,8 +341,11 @@ def _iterate_model(
     n = robot.n
     model = _model(disc, z, row_path_jacobian(robot, disc, z, basis, between=False), reach)
     if collisions is not None:
-        model = _with_rows(
-            model, *collision_rows(collisions, path, reach[:n], end=goal is not None)
+        model = _with_rows(  # a joint's largest step bound over the control points
+            model,
+            *collision_rows(
+                collisions, path, reach.reshape(-1, n).max(axis=0), end=goal is not None
+            ),
         )
     if via:  # every iterate goes through the via-points: B(σ_v) Δp = 0 per joint
         at = start.basis(np.asarray(via))[:, 1 : None if goal is not None else -1]
