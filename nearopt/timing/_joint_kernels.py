@@ -46,14 +46,21 @@ def _row_values(indptr, indices, data, x):  # pragma: no cover - compiled
 
 
 @inline_jit(error_model="numpy")
-def _add_cross(newton, c, j, value):  # pragma: no cover - compiled
-    """value at (c, j) and (j, c) of a symmetric matrix held in its lower triangle."""
-    if c > j:
-        newton[c, j] += value
-    elif c < j:
-        newton[j, c] += value
+def _add(band, position, i, j, value):  # pragma: no cover - compiled
+    """value at (i, j) of a symmetric matrix held as its lower band: the entry of the variables
+    at places P = position[i] ≥ Q = position[j] is band[P − Q, Q] (LAPACK's lower band storage
+    of the matrix in the places' order)."""
+    pi, pj = position[i], position[j]
+    if pi >= pj:
+        band[pi - pj, pj] += value
     else:
-        newton[c, c] += 2.0 * value
+        band[pj - pi, pi] += value
+
+
+@inline_jit(error_model="numpy")
+def _add_cross(newton, position, c, j, value):  # pragma: no cover - compiled
+    """value at (c, j) and (j, c) of a symmetric matrix held as its lower band."""
+    _add(newton, position, c, j, 2.0 * value if c == j else value)
 
 
 @cached_jit(error_model="numpy")
@@ -62,13 +69,13 @@ def assemble(
     indptr, indices, data, lo, hi, fin_lo, fin_hi,
     e_mat, e_rhs,
     t_count, t_scale, u0, t_weight, t_seg, ds, z_scale, f_scale, nz, group_start, group_rows,
-    newton, grad, r_hi, r_lo, r_e, r_d,
+    position, newton, grad, r_hi, r_lo, r_e, r_d,
 ):  # fmt: skip  # pragma: no cover - compiled
     """F, the residuals (into r_hi, r_lo, r_e, r_d), ∇F (into grad) and the Newton matrix
-    ∇²F + Σ_r (y/s)_r a_r a_rᵀ (into ``newton``, zeroed here, both triangles); returns
+    ∇²F + Σ_r (y/s)_r a_r a_rᵀ (into ``newton``, zeroed here: its lower band in the order of
+    ``position``, see :func:`_add`); returns
     (F, Σ s y, the largest row residual, the largest |r_d|)."""
     big_n = ds.size
-    nx = x.size
     m = indptr.size - 1
     ax = _row_values(indptr, indices, data, x)
     lam, dl, d2l = _lambdas(x, z_scale, nz)
@@ -91,9 +98,9 @@ def assemble(
         gy = -g[j] / y[j] - g[j + 1] / y[j + 1]
         gyy0, gyy1 = 2.0 * g[j] / y[j] ** 2, 2.0 * g[j + 1] / y[j + 1] ** 2
         grad[j] = gy * dl[j]
-        newton[j, j] += (gyy0 + gyy1) * dl[j] * dl[j] + gy * d2l[j]
+        _add(newton, position, j, j, (gyy0 + gyy1) * dl[j] * dl[j] + gy * d2l[j])
         if j + 1 < nz:
-            newton[j + 1, j] += gyy1 * dl[j] * dl[j + 1]
+            _add(newton, position, j + 1, j, gyy1 * dl[j] * dl[j + 1])
     d = np.empty(m)
     for r in range(m):
         d[r] = (y_hi[r] / s_hi[r] if fin_hi[r] else 0.0) + (y_lo[r] / s_lo[r] if fin_lo[r] else 0.0)
@@ -107,13 +114,10 @@ def assemble(
             c = indices[a]
             grad[c] += slope * t_scale[r] * data[a]
             if k >= 1:
-                _add_cross(newton, c, k - 1, mixed * data[a] * dl[k - 1])
+                _add_cross(newton, position, c, k - 1, mixed * data[a] * dl[k - 1])
             if k < nz:
-                _add_cross(newton, c, k, mixed * data[a] * dl[k])
-    _gram(indptr, indices, data, d, group_start, group_rows, newton)
-    for i in range(nx):
-        for j in range(i):
-            newton[j, i] = newton[i, j]
+                _add_cross(newton, position, c, k, mixed * data[a] * dl[k])
+    _gram(indptr, indices, data, d, group_start, group_rows, position, newton)
     return _residuals(
         x, nu, s_hi, s_lo, y_hi, y_lo, indptr, indices, data, ax, lo, hi, fin_lo, fin_hi,
         e_mat, e_rhs, grad, r_hi, r_lo, r_e, r_d, f,
@@ -121,22 +125,26 @@ def assemble(
 
 
 @inline_jit(error_model="numpy")
-def _gram(indptr, indices, data, d, group_start, group_rows, out):  # pragma: no cover
-    """out += Σ_r d_r a_r a_rᵀ in the lower triangle, the rows taken in groups (rows of a group
+def _gram(indptr, indices, data, d, group_start, group_rows, position, out):  # pragma: no cover
+    """out += Σ_r d_r a_r a_rᵀ in the lower band, the rows taken in groups (rows of a group
     share most of their columns: their sum is formed densely on the union of their columns,
     then added once)."""
-    nx = out.shape[0]
+    nx = position.size
     local = np.full(nx, -1)  # a column's place in the group's union
     columns = np.empty(nx, dtype=np.int64)
-    widest = 1
+    widest, union = 1, 1  # the most rows of a group, the most columns a group's rows can have
     for g in range(group_start.size - 1):
         widest = max(widest, group_start[g + 1] - group_start[g])
-    dense = np.zeros((widest, nx))
-    block = np.zeros((nx, nx))
+        entries = 0
+        for e in range(group_start[g], group_start[g + 1]):
+            entries += indptr[group_rows[e] + 1] - indptr[group_rows[e]]
+        union = max(union, min(entries, nx))
+    dense = np.zeros((widest, union))
+    block = np.zeros((union, union))
     for g in range(group_start.size - 1):
         first, end = group_start[g], group_start[g + 1]
         if end - first == 1:
-            _gram_row(indptr, indices, data, d, group_rows[first], out)
+            _gram_row(indptr, indices, data, d, group_rows[first], position, out)
             continue
         count = 0
         for e in range(first, end):
@@ -160,11 +168,7 @@ def _gram(indptr, indices, data, d, group_start, group_rows, out):  # pragma: no
         for a in range(count):
             ca = columns[a]
             for b in range(a + 1):
-                cb = columns[b]
-                if cb <= ca:
-                    out[ca, cb] += block[a, b]
-                else:
-                    out[cb, ca] += block[a, b]
+                _add(out, position, ca, columns[b], block[a, b])
         for a in range(count):
             local[columns[a]] = -1
 
@@ -180,7 +184,7 @@ def _rank_one(block, row, weight, count):  # pragma: no cover - compiled
 
 
 @inline_jit(error_model="numpy")
-def _gram_row(indptr, indices, data, d, r, out):  # pragma: no cover - compiled
+def _gram_row(indptr, indices, data, d, r, position, out):  # pragma: no cover - compiled
     dr = d[r]
     if dr == 0.0:
         return
@@ -189,7 +193,7 @@ def _gram_row(indptr, indices, data, d, r, out):  # pragma: no cover - compiled
         va = dr * data[a]
         ia = indices[a]
         for b in range(first, a + 1):
-            out[ia, indices[b]] += va * data[b]
+            _add(out, position, ia, indices[b], va * data[b])
 
 
 @inline_jit(error_model="numpy")

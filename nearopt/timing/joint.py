@@ -1,5 +1,5 @@
 """Stage 1's convex problem jointly with further variables p (stage 2's model), by nearopt's own
-primal-dual interior-point method with a dense Newton system in (z, p).
+primal-dual interior-point method with a banded Newton system in (z, p).
 
 The problem is that of :func:`~nearopt.timing.solve_conic`: over z = b_1 … b_{N−1} and p,
 
@@ -16,8 +16,12 @@ their KKT system per iteration; here the Newton system is formed directly in (z,
 
     (∇²F + Σ_r (y_r/s_r) a_r a_rᵀ) Δx = …,
 
-dense and of the size of x, summed over the rows' few nonzeros by compiled loops
-(:mod:`nearopt.timing._joint_kernels`), and factorised by Cholesky (LAPACK, one thread).
+of the size of x, summed over the rows' few nonzeros by compiled loops
+(:mod:`nearopt.timing._joint_kernels`; the rows at one knot as a group) and factorised by
+Cholesky (LAPACK, one thread). Every row is local along the path (two knots and the control
+points whose basis is nonzero there), so with the variables ordered along the path the matrix is
+a band (half-width ≈ 4n + a few knots): it is held and factorised as one (:class:`_Band`),
+nx·kd² instead of nx³/3.
 Equality rows (via-points, a goal pose) are kept exactly by a Schur complement on their
 multipliers.
 
@@ -156,14 +160,21 @@ class _Problem:
         m_rows, m_lo, m_hi, e_mat, self.e_rhs = _linear_block(rows, columns)
         z_hi = np.where(np.isfinite(z_upper), z_upper / self.z_scale, np.inf)
         self.mat = sp.vstack([t_rows, m_rows, sp.eye(self.nx, format="csr")]).tocsr()
-        # the torque rows of one sample (its n joints) share their columns: summed as a group
-        order = np.argsort(t_index % (2 * big_n), kind="stable")
-        sample = (t_index % (2 * big_n))[order]
-        starts = np.flatnonzero(np.r_[True, sample[1:] != sample[:-1]])
-        rest = np.arange(t_index.size, self.mat.shape[0])
-        self.group_rows = np.r_[order, rest].astype(np.int64)
-        self.group_start = np.r_[starts, t_index.size + np.arange(rest.size + 1)].astype(np.int64)
         self.mat.sort_indices()
+        # the rows at one knot (torque, speed, … of its samples) share most of their columns:
+        # summed as a group (a row without a knot alone)
+        counts = np.diff(self.mat.indptr)
+        first = np.where(
+            counts > 0,
+            self.mat.indices[np.minimum(self.mat.indptr[:-1], max(self.mat.nnz - 1, 0))],
+            self.nx,
+        )
+        key = np.where(first < self.nz, first, self.nz + np.arange(first.size))
+        self.group_rows = np.argsort(key, kind="stable").astype(np.int64)
+        keys = key[self.group_rows]
+        self.group_start = np.r_[
+            np.flatnonzero(np.r_[True, keys[1:] != keys[:-1]]), keys.size
+        ].astype(np.int64)
         self.top = self.mat[: self.t_count]  # the energy's torque rows
         self.e_dense = np.ascontiguousarray(e_mat.toarray())
         lo = np.concatenate([t_lo, m_lo, np.zeros(self.nz), p_bounds[0] / self.p_scale])
@@ -172,6 +183,7 @@ class _Problem:
         self.lo, self.hi = np.where(self.fin_lo, lo, 0.0), np.where(self.fin_hi, hi, 0.0)
         self.sides = int(self.fin_lo.sum() + self.fin_hi.sum())
         self.f_scale = 1.0 / self.cost(self.start())
+        self.band = _Band.of(self.mat, self.nz)
 
     def start(self) -> NDArray[np.float64]:
         """x at the start: z at the model's timing, p = 0."""
@@ -266,29 +278,111 @@ class _State:
         self.y_lo = np.where(pr.fin_lo, START_SLACK / self.s_lo, 0.0)
 
 
-class _Newton:
-    """The factorised Newton matrix and, with equalities, the Schur complement E H⁻¹ Eᵀ."""
+class _Band:
+    """Where the Newton matrix is held: as its lower band in an order of the variables along the
+    path (a knot's b at its place, a control point among the knots its rows touch), in which
+    every row's columns lie within ``kd`` places of each other, and so does every nonzero of
+    Σ_r a_r a_rᵀ and of ∇²F. The band then holds (kd + 1)·nx numbers and its Cholesky factor
+    costs nx·kd² instead of nx³/3 (LAPACK's pbtrf). Where no order makes it narrow enough to
+    pay (kd > nx / 4), the order is x's own and the band the whole lower triangle, factorised
+    densely.
 
-    def __init__(self, matrix: NDArray[np.float64], e_mat: NDArray[np.float64]) -> None:
-        try:
-            self.factor = la.cho_factor(matrix, lower=True, check_finite=False)
-        except la.LinAlgError:  # not positive definite to rounding: a tiny regularisation
-            shift = 1e-10 * max(float(np.max(np.abs(np.diag(matrix)))), 1e-300)
-            self.factor = la.cho_factor(
-                matrix + shift * np.eye(matrix.shape[0]), lower=True, check_finite=False
-            )
+    Attributes
+    ----------
+    order
+        The variables in the band's order; ``position`` its inverse (a variable's place).
+    kd
+        The band's half-width.
+    dense
+        Whether the whole lower triangle is held (then factorised as a dense matrix).
+    """
+
+    def __init__(self, order: NDArray[np.int64], kd: int) -> None:
+        nx = order.size
+        self.order, self.kd, self.dense = order, kd, kd == nx - 1
+        self.position = np.empty(nx, dtype=np.int64)
+        self.position[order] = np.arange(nx)
+        if self.dense:  # entry (i, j ≤ i) of the matrix is band[i − j, j]
+            i, j = np.tril_indices(nx)
+            self.lower = (i, j)
+            self.flat = (i - j) * nx + j
+
+    @staticmethod
+    def of(mat: sp.csr_matrix, nz: int) -> _Band:
+        """The band of the Newton matrix of rows ``mat`` over x = (z, p), z the first ``nz``
+        columns (the rows' columns sorted)."""
+        nx = mat.shape[1]
+        counts = np.diff(mat.indptr)
+        full = np.flatnonzero(counts)
+        first = mat.indices[mat.indptr[full]]  # a row's first (smallest) column
+        on_z = first < nz  # its place along the path: its first knot
+        rows = np.repeat(np.arange(counts.size), counts)
+        place = np.full(counts.size, -1.0)
+        place[full[on_z]] = first[on_z]
+        placed = place[rows] >= 0.0
+        total = np.bincount(mat.indices[placed], place[rows][placed], nx)
+        seen = np.bincount(mat.indices[placed], minlength=nx)
+        where = np.where(seen > 0, total / np.maximum(seen, 1), np.inf)
+        where[:nz] = np.arange(nz)  # a knot's b at its own place
+        order = np.lexsort((np.arange(nx) >= nz, where))
+        position = np.empty(nx, dtype=np.int64)
+        position[order] = np.arange(nx)
+        at = position[mat.indices]
+        kd = 1 if nz > 1 else 0  # ∇²F couples neighbouring knots
+        if full.size:
+            starts = mat.indptr[full]
+            spans = np.maximum.reduceat(at, starts) - np.minimum.reduceat(at, starts)
+            kd = max(kd, int(np.max(spans)))
+        if 4 * kd > nx:
+            return _Band(np.arange(nx), nx - 1)
+        return _Band(order, kd)
+
+
+class _Newton:
+    """The factorised Newton matrix (given as its lower band, :class:`_Band`) and, with
+    equalities, the Schur complement E H⁻¹ Eᵀ."""
+
+    def __init__(self, ab: NDArray[np.float64], e_mat: NDArray[np.float64], band: _Band) -> None:
+        self.band = band
+        if band.dense:
+            nx = ab.shape[1]
+            matrix = np.zeros((nx, nx))
+            matrix[band.lower] = ab.ravel()[band.flat]
+            try:
+                self.factor = la.cho_factor(matrix, lower=True, check_finite=False)
+            except la.LinAlgError:  # not positive definite to rounding: a tiny regularisation
+                matrix[np.diag_indices(nx)] += 1e-10 * max(float(np.max(np.abs(ab[0]))), 1e-300)
+                self.factor = la.cho_factor(matrix, lower=True, check_finite=False)
+        else:
+            try:
+                self.factor = la.cholesky_banded(ab, lower=True, check_finite=False)
+            except la.LinAlgError:  # as above
+                ab = ab.copy()
+                ab[0] += 1e-10 * max(float(np.max(np.abs(ab[0]))), 1e-300)
+                self.factor = la.cholesky_banded(ab, lower=True, check_finite=False)
         self.e_mat = e_mat
         if e_mat.shape[0]:
-            self.h_et = la.cho_solve(self.factor, e_mat.T, check_finite=False)
+            self.h_et = self._solve(e_mat.T)
             schur = e_mat @ self.h_et
             shift = 1e-13 * max(float(np.max(np.abs(np.diag(schur)))), 1e-300)
             self.schur = la.cho_factor(schur + shift * np.eye(schur.shape[0]), lower=True)
+
+    def _solve(self, rhs: NDArray[np.float64]) -> NDArray[np.float64]:
+        """H⁻¹ rhs (rhs of shape (nx,) or (nx, k))."""
+        band = self.band
+        if band.dense:
+            return la.cho_solve(self.factor, rhs, check_finite=False)
+        out = np.empty_like(rhs)
+        out[band.order] = la.cho_solve_banded(
+            (self.factor, True), rhs[band.order], check_finite=False
+        )
+        return out
 
     def solve(
         self, rhs: NDArray[np.float64], r_e: NDArray[np.float64]
     ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """Δx and Δν of [H Eᵀ; E 0] (Δx, Δν) = (rhs, −r_e)."""
-        dx = la.cho_solve(self.factor, rhs, check_finite=False)
+        dx = self._solve(rhs)
         if not self.e_mat.shape[0]:
             return dx, np.zeros(0)
         dnu = la.cho_solve(self.schur, r_e + self.e_mat @ dx, check_finite=False)
@@ -309,14 +403,14 @@ def _iterate(pr: _Problem, tolerance: float, max_iterations: int) -> JointSoluti
         f, gap, worst, rd_max = kernels.assemble(
             st.x, st.nu, *sides, *csr, pr.lo, pr.hi, *finite, pr.e_dense, pr.e_rhs,
             *energy, pr.f_scale, pr.nz, pr.group_start, pr.group_rows,
-            w.newton, w.grad, w.r_hi, w.r_lo, w.r_e, w.r_d,
+            pr.band.position, w.newton, w.grad, w.r_hi, w.r_lo, w.r_e, w.r_d,
         )  # fmt: skip
         if not (np.isfinite(f) and np.isfinite(gap) and np.isfinite(rd_max)):
             return _answer(pr, st, False, iteration, "the iterate is not finite")
         if gap <= tolerance and worst <= tolerance and rd_max <= tolerance:
             return _answer(pr, st, True, iteration - 1, f"converged in {iteration - 1} iterations")
         try:
-            system = _Newton(w.newton, pr.e_dense)
+            system = _Newton(w.newton, pr.e_dense, pr.band)
         except la.LinAlgError:
             return _answer(pr, st, False, iteration, "the Newton matrix is singular")
         np.multiply(st.s_hi, st.y_hi, out=w.rc_hi)  # the predictor: targets s y → 0
@@ -362,7 +456,8 @@ class _Work:
 
     def __init__(self, pr: _Problem) -> None:
         nx, m = pr.nx, pr.lo.size
-        self.newton, self.grad, self.r_d, self.rhs = np.empty((nx, nx)), *np.empty((3, nx))
+        self.newton = np.empty((pr.band.kd + 1, nx))
+        self.grad, self.r_d, self.rhs = np.empty((3, nx))
         self.r_hi, self.r_lo, self.rc_hi, self.rc_lo = np.empty((4, m))
         self.r_e = np.empty(pr.e_rhs.size)
         self.affine = list(np.empty((4, m)))
