@@ -44,7 +44,7 @@ from .planning.planner import minimum_duration
 from .planning.task import check_targets
 from .robot import Robot
 from .robot.kinematics import ToolPose
-from .validate import MAX_RATE, MAX_SAMPLES, check_rate, check_samples
+from .validate import MAX_RATE, MAX_SAMPLES, check_rate, check_samples, is_number
 from .verify import VerificationReport, verify_plan
 
 if TYPE_CHECKING:
@@ -174,28 +174,25 @@ class PlanRequest:
         as the command line's is): numbers, lists of numbers, via-points as lists of lists,
         names as strings."""
 
-        def number(x: object) -> bool:
-            return isinstance(x, int | float | np.integer | np.floating) and not isinstance(x, bool)
-
         for f in fields(self):
             value, kind = getattr(self, f.name), str(f.type)
             if value is None or value == f.default:
                 continue
             if f.name == "via":
                 good = isinstance(value, tuple | list) and all(
-                    isinstance(v, tuple | list) and all(number(x) for x in v) for v in value
+                    isinstance(v, tuple | list) and all(is_number(x) for x in v) for v in value
                 )
                 wants = "a list of via-points, each a list of joint values"
             elif "tuple[float" in kind:
-                good = isinstance(value, tuple | list) and all(number(x) for x in value)
+                good = isinstance(value, tuple | list) and all(is_number(x) for x in value)
                 wants = "a list of numbers"
             elif "tuple[str" in kind:
                 good = isinstance(value, tuple | list) and all(isinstance(x, str) for x in value)
                 wants = "a list of names"
             elif kind.startswith("float"):
-                good, wants = number(value), "a number"
+                good, wants = is_number(value), "a number"
             elif kind.startswith("int"):
-                good = number(value) and isinstance(value, int | np.integer)
+                good = is_number(value) and isinstance(value, int | np.integer)
                 wants = "an integer"
             elif kind.startswith("str"):
                 good = isinstance(value, str)

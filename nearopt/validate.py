@@ -15,6 +15,12 @@ MAX_SAMPLES = 10_000_000
 """Samples of a written motion (rate × t_e) at most: beyond, a file would take gigabytes."""
 
 
+def is_number(value: object) -> bool:
+    """Whether ``value`` is a real number: Python's int or float or NumPy's integer or floating
+    scalar (not a bool, which Python counts as an int; maybe not finite)."""
+    return isinstance(value, int | float | np.integer | np.floating) and not isinstance(value, bool)
+
+
 def check_rate(rate: object, what: str = "rate") -> float:
     """A sampling or controller rate [Hz]: a finite number in (0, :data:`MAX_RATE`].
 
@@ -23,8 +29,7 @@ def check_rate(rate: object, what: str = "rate") -> float:
     ConfigurationError
         ``"{what} must be a number of Hz in (0, 1e+06], got …"``.
     """
-    number = isinstance(rate, int | float | np.integer | np.floating) and not isinstance(rate, bool)
-    if not (number and np.isfinite(rate) and 0 < rate <= MAX_RATE):  # type: ignore[operator]
+    if not (is_number(rate) and np.isfinite(rate) and 0 < rate <= MAX_RATE):  # type: ignore[operator]
         raise ConfigurationError(
             f"{what} must be a number of Hz in (0, {MAX_RATE:.0e}], got {rate!r}"
         )

@@ -20,7 +20,7 @@ import numpy as np
 import pinocchio as pin
 
 from .errors import ConfigurationError, VerificationError
-from .validate import check_rate
+from .validate import check_rate, is_number
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -338,7 +338,7 @@ def _check_extras(robot: Robot, cost: object, J: object, collisions: object) -> 
             raise ConfigurationError(
                 "J is checked against ∫ f0 dt of its cost: pass cost= too (result.cost)"
             )
-        if isinstance(J, bool) or not isinstance(J, int | float | np.integer | np.floating):
+        if not is_number(J):
             raise ConfigurationError(f"J must be a number, got {type(J).__name__} {J!r:.40}")
     if cost is not None:
         check_cost(cost)

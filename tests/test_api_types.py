@@ -115,3 +115,15 @@ def test_numpy_numbers_are_numbers() -> None:
         time_limit=np.float32(60.0),
     )  # fmt: skip
     assert result.J > 0
+    model = nearopt.CollisionModel(robot, margin=np.float32(0.02))  # it was refused here
+    assert model.margin == pytest.approx(0.02) and type(model.margin) is float
+    with pytest.raises(nearopt.ConfigurationError, match="margin must be a distance"):
+        nearopt.CollisionModel(robot, margin=True)
+    task = nearopt.plan_task(
+        robot,
+        THETA_0,
+        [THETA_E],
+        COST,
+        nearopt.PlanSettings(grid=20, max_iterations=0, time_limit=np.float64(60.0)),
+    )  # fmt: skip  (a task's time limit was refused as a NumPy number)
+    assert task.J > 0

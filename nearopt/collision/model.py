@@ -46,6 +46,7 @@ from scipy.spatial import ConvexHull, QhullError
 from ..errors import CollisionError, ConfigurationError, SceneError, URDFError
 from ..path import BSplinePath, SplinePath, StraightPath
 from ..robot import check_robot
+from ..validate import is_number
 from .scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sphere
 
 if TYPE_CHECKING:
@@ -159,7 +160,7 @@ class CollisionModel:
         if not isinstance(self.scene, Scene):
             raise SceneError(f"scene must be a nearopt Scene, got {type(scene).__name__}")
         margin = self.scene.margin if margin is None else margin
-        if not (isinstance(margin, int | float) and np.isfinite(margin) and margin >= 0.0):
+        if not (is_number(margin) and np.isfinite(margin) and margin >= 0.0):
             raise ConfigurationError(f"margin must be a distance ≥ 0 [m], got {margin!r}")
         self.margin = float(margin)
         model = robot.model

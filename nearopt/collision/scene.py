@@ -35,6 +35,7 @@ import numpy as np
 
 from ..errors import SceneError
 from ..inputs import read_toml
+from ..validate import is_number
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -209,10 +210,7 @@ class Scene:
                     field="name",
                 )
             seen.add(ob.name)
-        number = isinstance(self.margin, int | float | np.integer | np.floating)
-        if isinstance(self.margin, bool) or not (
-            number and math.isfinite(self.margin) and self.margin >= 0.0
-        ):
+        if not (is_number(self.margin) and math.isfinite(self.margin) and self.margin >= 0.0):
             raise SceneError(
                 f"margin must be a distance ≥ 0 [m], got {self.margin!r}", field="margin"
             )

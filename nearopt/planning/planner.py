@@ -36,6 +36,7 @@ from ..path import Path
 from ..robot import Robot
 from ..robot.kinematics import ToolPose, inverse_kinematics
 from ..timing import MAX_GRID, TimingResult, optimal_timing
+from ..validate import is_number
 from .paper import paper_iterations
 from .records import (
     MAX_CONTROL_POINTS,
@@ -243,8 +244,7 @@ def _setup(
                 + (f" and ≤ {high}" if high < np.inf else "")
                 + f", got {value!r}"
             )
-    number = isinstance(time_limit, int | float | np.integer | np.floating)
-    if isinstance(time_limit, bool) or not (number and time_limit > 0):
+    if not (is_number(time_limit) and time_limit > 0):
         raise ConfigurationError(
             f"time_limit must be a positive number of seconds (inf: none), got {time_limit!r}"
         )

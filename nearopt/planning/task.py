@@ -43,6 +43,7 @@ from ..inputs import read_toml
 from ..robot import Robot
 from ..robot.kinematics import ToolPose
 from ..trajectory import ChainedTrajectory
+from ..validate import is_number
 from ..verify import Waypoint
 from .planner import plan
 from .records import Iteration, PlanResult, PlanSettings, StopReason
@@ -416,11 +417,7 @@ def plan_task(
         raise ConfigurationError("give the start configuration q0 (the task has no start)")
     cost = TimeCost() if cost is None else cost
     time_limit = settings.time_limit
-    if (
-        isinstance(time_limit, bool)
-        or not isinstance(time_limit, int | float)
-        or not (time_limit > 0)
-    ):
+    if not is_number(time_limit) or not (time_limit > 0):
         raise ConfigurationError(
             f"time_limit must be a positive number of seconds, got {time_limit!r}"
         )
