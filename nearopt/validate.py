@@ -38,7 +38,8 @@ def check_rate(rate: object, what: str = "rate") -> float:
 
 def check_samples(rate: float, duration: float, what: str = "rate", at_least: bool = False) -> None:
     """That a motion of ``duration`` [s] written at ``rate`` [Hz] has at most
-    :data:`MAX_SAMPLES` samples.
+    :data:`MAX_SAMPLES` samples. ``what`` names the rate in the message; ``at_least`` says the
+    duration is a lower bound (a motion not planned yet: "would last at least").
 
     Raises
     ------

@@ -231,7 +231,11 @@ def verify(
     Raises
     ------
     ConfigurationError
-        If the rate is not a number of Hz in (0, 1e6] or q0 / qe have the wrong length.
+        If the rate is not a number of Hz in (0, 1e6]; q0 / qe have the wrong length; the
+        trajectory is not a motion (a plan's result instead of its ``trajectory``) or moves
+        another number of joints than the robot; J is given without its cost or is not a
+        number; the cost is not a :class:`~nearopt.Cost`; the collision model is not one or
+        was built for another robot.
     """
     rate = check_rate(rate, "the controller rate")
     _check_motion(trajectory, robot)
