@@ -31,6 +31,7 @@ from .errors import (
     CollisionError,
     ConfigurationError,
     InfeasiblePathError,
+    LimitWarning,
     NearoptError,
     RobotNotFoundError,
     SamplingWarning,
@@ -117,6 +118,7 @@ __all__ = [
     "TaskError",
     "UnreachablePoseError",
     "SamplingWarning",
+    "LimitWarning",
 ]
 
 __version__ = "0.1.0"

@@ -29,7 +29,7 @@ import numpy as np
 
 from .collision import Mesh, Scene
 from .cost import Cost, TimeCost, TorqueCost
-from .errors import ConfigurationError, SamplingWarning
+from .errors import ConfigurationError, LimitWarning, SamplingWarning
 from .planning import (
     METHODS,
     Iteration,
@@ -68,7 +68,7 @@ __all__ = [
 
 OUTPUT_OPTIONS = ("json", "csv", "html", "plots", "show")
 """Options of ``nearopt plan`` that write or show the plan: the caller's, not the request's."""
-FILE_FIELDS = ("urdf", "srdf", "scene", "task")
+FILE_FIELDS = ("urdf", "srdf", "scene", "task", "joint_limits")
 """The fields that name files (read when the request is prepared)."""
 DISPLAY_OPTIONS = ("verify", "quiet")
 """Options of ``nearopt plan`` that only change what it prints (accepted, and ignored, in a
@@ -103,6 +103,9 @@ class PlanRequest:
         Limits overriding the URDF's: one value or one per joint [N·m or N; rad/s; rad/s²].
     velocity_scale
         A factor on every joint speed limit.
+    joint_limits
+        A MoveIt ``joint_limits.yaml`` whose limits replace the URDF's
+        (:meth:`~nearopt.Robot.with_joint_limits`); the options above replace both.
     q0, qe, goal_pose, frame, via, task, fixed_goal, deg
         Start, goal (joint values, a tool pose x y z [qx qy qz qw] of ``frame``, or a task file),
         via-points, whether inverse kinematics' goal stays fixed, whether joint values are in
@@ -133,6 +136,7 @@ class PlanRequest:
     velocity_limit: tuple[float, ...] | None = None
     velocity_scale: float | None = None
     acceleration_limit: tuple[float, ...] | None = None
+    joint_limits: str | None = None
     q0: tuple[float, ...] | None = None
     qe: tuple[float, ...] | None = None
     goal_pose: tuple[float, ...] | None = None
@@ -373,6 +377,7 @@ _KINDS: dict[str, _Kind] = {
     "velocity_limit": _Kind.NUMBERS,
     "velocity_scale": _Kind.NUMBER,
     "acceleration_limit": _Kind.NUMBERS,
+    "joint_limits": _Kind.TEXT,
     "q0": _Kind.NUMBERS,
     "qe": _Kind.NUMBERS,
     "goal_pose": _Kind.NUMBERS,
@@ -504,6 +509,7 @@ class Prepared:
             "the SRDF": request.srdf,
             "the task": request.task,
             "the scene": request.scene,
+            "the joint limits file": request.joint_limits,
         }
         out = {what: Path(path) for what, path in files.items() if path is not None}
         for mesh in _urdf_meshes(self.robot):  # by its name, or its path where names repeat
@@ -623,7 +629,19 @@ def solve(
     segment_callback: Callable[[int, Iteration], None] | None = None,
 ) -> PlanResult | TaskResult:
     """Plan a prepared request: :func:`~nearopt.plan`, or :func:`~nearopt.plan_task` for a task
-    (``segment_callback(k, iteration)`` then)."""
+    (``segment_callback(k, iteration)`` then). The limits the planner does not hold
+    (:meth:`~nearopt.Robot.unheld_limits`) are not warned of here: the entry points say them
+    once (the command before planning, :func:`run` in its notes)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", LimitWarning)
+        return _solve(prepared, callback, segment_callback)
+
+
+def _solve(
+    prepared: Prepared,
+    callback: Callable[[Iteration], None] | None,
+    segment_callback: Callable[[int, Iteration], None] | None,
+) -> PlanResult | TaskResult:
     request = prepared.request
     settings = PlanSettings(
         method=request.method,
@@ -700,7 +718,8 @@ def run(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Outcom
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SamplingWarning)
         check_sampling(result, request.rate)
-    notes = tuple(dict.fromkeys(str(w.message) for w in caught))
+    unheld = prepared.robot.unheld_limits()
+    notes = tuple(dict.fromkeys([*([unheld] if unheld else []), *(str(w.message) for w in caught)]))
     return Outcome(result, report, notes, prepared)
 
 
@@ -763,6 +782,8 @@ def _robot(request: PlanRequest, loader: RobotLoader | None = None) -> Robot:
         None if request.robot else single_effort,
     )
     robot = load() if loader is None else loader(key, load)
+    if request.joint_limits is not None:
+        robot = robot.with_joint_limits(request.joint_limits)
     overrides: dict[str, Any] = {}
     for option, name in (
         ("effort_limit", "effort"),

@@ -250,7 +250,13 @@ def _planner_options(p: argparse.ArgumentParser) -> None:
         type=float,
         metavar="A",
         help="joint acceleration limits |qdd| <= A [rad/s²]: one value for every joint "
-        "or one per joint (default: none)",
+        "or one per joint (default: the URDF's, URDF 1.2 <limit acceleration=...>; else none)",
+    )
+    p.add_argument(
+        "--joint-limits",
+        metavar="FILE",
+        help="MoveIt's joint_limits.yaml: its declared speed, acceleration, jerk, effort and "
+        "position limits replace the URDF's (the --*-limit options replace both)",
     )
     p.add_argument("--no-position-limits", action="store_true", help="ignore joint position limits")
 
@@ -387,6 +393,9 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     prepared = prepare(request)
     refuse_inputs(outputs, prepared.input_files())
     quiet = args.quiet or args.stage1_only
+    unheld = prepared.robot.unheld_limits()
+    if unheld is not None:
+        print(f"nearopt: warning: {unheld}", file=sys.stderr)
 
     def progress(entry: Iteration) -> None:
         print(_format(entry), file=out, flush=True)

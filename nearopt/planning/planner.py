@@ -19,6 +19,7 @@ update (stage 2) is one of :class:`~nearopt.planning.Method`:
 from __future__ import annotations
 
 import time
+import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -29,6 +30,7 @@ from ..collision import Clearance, CollisionModel, Scene, collisions_for
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import (
     ConfigurationError,
+    LimitWarning,
     SolverError,
     UnreachablePoseError,
 )
@@ -233,6 +235,7 @@ def _setup(
             f"Robot.from_urdf(path)), got {type(robot).__name__} {robot!r:.60}"
         )
     cost = TimeCost() if cost is None else check_cost(cost)
+    _warn_unheld(robot)
     method, options = _check_method(method, options, cost)
     for name, value, low, high in (
         ("max_iterations", max_iterations, 0, np.inf),
@@ -542,6 +545,14 @@ def _certify(collisions: CollisionModel, path: Path) -> Clearance:
             f"at s = {clear.s:.4f}"
         )
     return clear
+
+
+def _warn_unheld(robot: Robot) -> None:
+    """A :class:`~nearopt.LimitWarning` at :func:`plan`'s caller if the robot declares limits
+    the planner does not hold."""
+    unheld = robot.unheld_limits()
+    if unheld is not None:
+        warnings.warn(unheld, LimitWarning, stacklevel=4)
 
 
 def _check_method(

@@ -29,7 +29,7 @@ import pinocchio as pin
 
 from .. import catalog
 from ..errors import ConfigurationError, URDFError
-from .urdf import read_urdf
+from .urdf import RateLimits, read_urdf
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -72,10 +72,17 @@ class JointLimits:
     effort_lower, effort_upper
         Actuator limits u_min ≤ u ≤ u_max of eq. (2) [N·m or N].
     acceleration
-        Joint acceleration limits |θ̈_i| ≤ acceleration_i [rad/s² or m/s²]; inf where none (URDF
-        has no acceleration limits: they are set with :meth:`Robot.with_limits`).
+        Joint acceleration limits |θ̈_i| ≤ acceleration_i [rad/s² or m/s²]; inf where none: from
+        a URDF 1.2 ``<limit acceleration=… deceleration=…>`` (the smaller of the two: nearopt's
+        limit holds for speeding up and slowing down alike), a MoveIt ``joint_limits.yaml``
+        (:meth:`Robot.with_joint_limits`) or :meth:`Robot.with_limits`.
     names
         The joints' names, for messages (a :class:`Robot`'s limits carry its joints').
+    jerk
+        Joint jerk limits |θ⃛_i| ≤ jerk_i [rad/s³ or m/s³] the robot's files declare (URDF 1.2
+        ``<limit jerk=…>``, ``joint_limits.yaml``); inf where none (the default). Read and shown,
+        **not yet held** by the planner: :func:`~nearopt.plan` warns
+        (:class:`~nearopt.LimitWarning`) when any is finite.
 
     Every array is made read-only; they must have one shape (n,), no NaN, and each lower limit at
     most its upper one (a :class:`~nearopt.ConfigurationError` otherwise).
@@ -88,6 +95,7 @@ class JointLimits:
     effort_upper: NDArray[np.float64]
     acceleration: NDArray[np.float64]
     names: tuple[str, ...] = ()
+    jerk: NDArray[np.float64] | None = None
 
     _ARRAYS = (
         "position_lower",
@@ -96,9 +104,12 @@ class JointLimits:
         "effort_lower",
         "effort_upper",
         "acceleration",
+        "jerk",
     )
 
     def __post_init__(self) -> None:
+        if self.jerk is None:
+            object.__setattr__(self, "jerk", np.full(np.shape(self.position_lower), np.inf))
         for key in self._ARRAYS:
             object.__setattr__(self, key, _readonly(getattr(self, key)))
         n = self.position_lower.shape
@@ -168,6 +179,18 @@ class PathCoefficients(NamedTuple):
     c: NDArray[np.float64]
     d: NDArray[np.float64]
     g: NDArray[np.float64]
+
+
+def _rate_arrays(
+    rates: dict[str, RateLimits], names: list[str]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The joints' acceleration limits (the smaller of a URDF 1.2 acceleration and
+    deceleration: nearopt's limit is one for both) and jerk limits, inf where none."""
+    found = [rates.get(name) or RateLimits() for name in names]
+    return (
+        np.array([min(r.acceleration, r.deceleration) for r in found], dtype=float),
+        np.array([r.jerk for r in found], dtype=float),
+    )
 
 
 class Robot:
@@ -350,15 +373,11 @@ class Robot:
         velocity[velocity <= 0.0] = np.inf
         effort_lower = np.array(model.lowerEffortLimit, dtype=float)
         effort_upper = np.array(model.upperEffortLimit, dtype=float)
+        acceleration, jerk = _rate_arrays(arm.rates, names)
         robot = cls(
             model,
             limits=JointLimits(
-                lower,
-                upper,
-                velocity,
-                effort_lower,
-                effort_upper,
-                np.full(n, np.inf),
+                lower, upper, velocity, effort_lower, effort_upper, acceleration, jerk=jerk
             ),
             damping=np.array(model.damping, dtype=float),
             name=name or robot_name,
@@ -408,6 +427,76 @@ class Robot:
         kwargs.update(overrides)
         return cls.from_urdf(entry.urdf, **kwargs)  # type: ignore[arg-type]
 
+    def with_joint_limits(self, path: str | os.PathLike[str]) -> Robot:
+        """A copy of this robot with the limits of a MoveIt ``joint_limits.yaml`` (see
+        :mod:`nearopt.robot.joint_limits_file`): each declared velocity, acceleration (the
+        smaller of acceleration and deceleration), jerk, effort (symmetric) and position range
+        replaces this robot's; joints it locks are skipped.
+
+        Raises
+        ------
+        ConfigurationError
+            An unreadable or malformed file, a joint the URDF does not have, a value that is
+            not a positive number (naming the file, joint and key).
+        """
+        from .joint_limits_file import read_joint_limits
+
+        declared = read_joint_limits(path)
+        known = set(self.joint_names) | set(self.locked_joints) | self._urdf_joint_names()
+        unknown = [name for name in declared if name not in known]
+        if unknown:
+            raise ConfigurationError(
+                f"{path} limits joint {unknown[0]!r}, which {self.name} does not have (its "
+                f"joints: {', '.join(self.joint_names)})",
+                joint=unknown[0],
+            )
+        lim = self.limits
+        arrays = {
+            "velocity": lim.velocity.copy(),
+            "acceleration": lim.acceleration.copy(),
+            "jerk": lim.jerk.copy(),
+        }
+        e_lo, e_hi = lim.effort_lower.copy(), lim.effort_upper.copy()
+        p_lo, p_hi = lim.position_lower.copy(), lim.position_upper.copy()
+        for i, jn in enumerate(self.joint_names):
+            entry = declared.get(jn)
+            if entry is None:
+                continue
+            for key in ("velocity", "jerk"):
+                if getattr(entry, key) is not None:
+                    arrays[key][i] = getattr(entry, key)
+            given = [v for v in (entry.acceleration, entry.deceleration) if v is not None]
+            if given:
+                arrays["acceleration"][i] = min(given)
+            if entry.effort is not None:
+                e_lo[i], e_hi[i] = -entry.effort, entry.effort
+            if entry.position is not None:
+                p_lo[i], p_hi[i] = entry.position
+        return self.with_limits(effort=(e_lo, e_hi), position=(p_lo, p_hi), **arrays)
+
+    def _urdf_joint_names(self) -> set[str]:
+        """Every joint name of the URDF (fixed and locked ones too); none without a URDF."""
+        if self.urdf_xml is None:
+            return set()
+        import xml.etree.ElementTree as ET
+
+        return {j.get("name", "") for j in ET.fromstring(self.urdf_xml).iter("joint")}
+
+    def unheld_limits(self) -> str | None:
+        """What the robot declares that :func:`~nearopt.plan` does not hold, in one sentence
+        (its jerk limits), or None."""
+        jerk = self.limits.jerk
+        if not np.any(np.isfinite(jerk)):
+            return None
+        named = ", ".join(
+            f"{jn} {j:g}" for jn, j in zip(self.joint_names, jerk, strict=True) if np.isfinite(j)
+        )
+        return (
+            f"{self.name} declares jerk limits ({named} rad/s³ or m/s³) that this version of "
+            "nearopt does not hold: its motions keep the torque, speed, position and "
+            "acceleration limits, and θ̈ may jump at the timing's knots"
+        )
+
     def with_limits(
         self,
         *,
@@ -416,6 +505,7 @@ class Robot:
         position: tuple[ArrayLike, ArrayLike] | None = None,
         damping: ArrayLike | None = None,
         acceleration: ArrayLike | None = None,
+        jerk: ArrayLike | None = None,
     ) -> Robot:
         """A copy of this robot with some limits (or the damping) replaced.
 
@@ -432,7 +522,10 @@ class Robot:
             Viscous damping d_i [N·m·s/rad or N·s/m], scalar or (n,).
         acceleration
             Joint acceleration limits |θ̈_i| ≤ a_i [rad/s² or m/s²], scalar or (n,); ``np.inf``
-            removes them (the default: URDFs declare none).
+            removes them (the default where the URDF declares none).
+        jerk
+            Joint jerk limits |θ⃛_i| ≤ j_i [rad/s³ or m/s³], scalar or (n,); ``np.inf`` removes
+            them. Kept and shown, not yet held by the planner (:class:`~nearopt.LimitWarning`).
 
         Raises
         ------
@@ -472,6 +565,11 @@ class Robot:
             acc = self._joint_array(acceleration, "acceleration limit", allow_inf=True)
             self._check_positive(acc, "acceleration limit")
             acc = np.where(acc >= NO_LIMIT, np.inf, acc)
+        jerks = lim.jerk
+        if jerk is not None:
+            jerks = self._joint_array(jerk, "jerk limit", allow_inf=True)
+            self._check_positive(jerks, "jerk limit")
+            jerks = np.where(jerks >= NO_LIMIT, np.inf, jerks)
         damp = self.damping
         if damping is not None:
             damp = self._joint_array(damping, "damping")
@@ -490,6 +588,7 @@ class Robot:
                 e_lo,
                 e_hi,
                 acc,
+                jerk=jerks,
             ),
             damping=damp,
             name=self.name,
@@ -544,12 +643,16 @@ class Robot:
             f"{'joint':<28}{'position [lo, hi]':>24}{'|velocity|':>12}"
             f"{'effort [lo, hi]':>22}{'damping':>10}{'|accel.|':>10}",
         ]
+        jerk = np.any(np.isfinite(lim.jerk))  # a column where any joint has a jerk limit
+        if jerk:
+            rows[-1] += f"{'|jerk|':>10}"
         for i, jn in enumerate(self.joint_names):
             rows.append(
                 f"{jn:<28}{f'[{lim.position_lower[i]:.4g}, {lim.position_upper[i]:.4g}]':>24}"
                 f"{lim.velocity[i]:>12.4g}"
                 f"{f'[{lim.effort_lower[i]:.4g}, {lim.effort_upper[i]:.4g}]':>22}"
                 f"{self.damping[i]:>10.4g}{lim.acceleration[i]:>10.4g}"
+                + (f"{lim.jerk[i]:>10.4g}" if jerk else "")
             )
         return "\n".join(rows)
 

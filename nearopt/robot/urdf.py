@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import math
 import xml.etree.ElementTree as ET
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -34,7 +34,7 @@ _NUMBERS = {
     "mass": ("value",),
     "inertia": ("ixx", "ixy", "ixz", "iyy", "iyz", "izz"),
     "axis": ("xyz",),
-    "limit": ("lower", "upper", "effort", "velocity"),
+    "limit": ("lower", "upper", "effort", "velocity", "acceleration", "deceleration", "jerk"),
     "dynamics": ("damping", "friction"),
     "mimic": ("multiplier", "offset"),
 }
@@ -58,6 +58,9 @@ class ArmDescription:
         The moving joints to lock.
     locked_in_xml
         Their names in ``xml`` (a locked joint that shares its name with a link is renamed).
+    rates
+        URDF 1.2's limits of the moving joints' rates, by joint name: ``<limit acceleration=…
+        deceleration=… jerk=…>`` [rad/s², rad/s², rad/s³ or m/s…], inf where not declared.
     """
 
     name: str
@@ -66,6 +69,24 @@ class ArmDescription:
     no_effort: tuple[str, ...]
     locked: tuple[str, ...]
     locked_in_xml: tuple[str, ...]
+    rates: dict[str, RateLimits] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class RateLimits:
+    """One joint's URDF 1.2 rate limits (inf: none declared).
+
+    Attributes
+    ----------
+    acceleration, deceleration
+        |θ̈| while the joint speeds up / slows down [rad/s² or m/s²].
+    jerk
+        |θ⃛| [rad/s³ or m/s³].
+    """
+
+    acceleration: float = math.inf
+    deceleration: float = math.inf
+    jerk: float = math.inf
 
 
 def _error(path: Path, message: str) -> URDFError:
@@ -343,8 +364,12 @@ def read_urdf(
     locked = tuple(dict.fromkeys(n for n in locked if joints[n].get("type") != "fixed"))
     _check_inertials(root, path, _moved_links(root, locked))
     continuous, no_effort = [], []
+    rates: dict[str, RateLimits] = {}
     for name, joint in joints.items():
         _check_joint(name, joint, path, locked, continuous, no_effort)
+        if joint.get("type") != "fixed":
+            rates[name] = _rate_limits(name, joint, path)
+    rates = {name: r for name, r in rates.items() if name not in locked}
     renamed = _rename_locked(root, joints, locked)
     return ArmDescription(
         name=root.get("name", path.stem),
@@ -353,7 +378,29 @@ def read_urdf(
         no_effort=tuple(no_effort),
         locked=locked,
         locked_in_xml=tuple(renamed.get(name, name) for name in locked),
+        rates=rates,
     )
+
+
+def _rate_limits(name: str, joint: ET.Element, path: Path) -> RateLimits:
+    """A moving joint's ``<limit acceleration deceleration jerk>`` (URDF 1.2; numbers checked
+    finite by :func:`_check_numbers`), each > 0 where given; removed from the element (the
+    text Pinocchio reads is URDF 1.0)."""
+    limit = joint.find("limit")
+    values = {}
+    for attr in ("acceleration", "deceleration", "jerk"):
+        text = None if limit is None else limit.attrib.pop(attr, None)
+        if text is None:
+            continue
+        value = float(text)
+        if not value > 0.0:
+            raise _error(
+                path,
+                f"joint {name!r} has a {attr} limit {text}: it must be > 0 (leave the attribute "
+                "out for none)",
+            )
+        values[attr] = value
+    return RateLimits(**values)
 
 
 def _parse(path: Path) -> ET.Element:
