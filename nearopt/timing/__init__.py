@@ -55,6 +55,7 @@ from .conic import ConicSolution, is_solved, solve_conic
 from .discretisation import Discretisation, LinearRows, RowBlocks
 from .driver import TimingResult, optimal_timing
 from .interior import InteriorSolution, load_kernel, solve_interior
+from .jerk import JerkTiming, jerk_limited_timing
 from .joint import JointSolution, solve_joint
 from .problem import (
     MAX_GRID,
@@ -96,6 +97,8 @@ __all__ = [
     "RowBlocks",
     "InteriorSolution",
     "solve_interior",
+    "JerkTiming",
+    "jerk_limited_timing",
     "JointSolution",
     "solve_joint",
     "load_kernel",

@@ -1,0 +1,549 @@
+"""Jerk-limited timing of a path: |θ⃛_i(t)| ≤ j_i for all t, by sequential convex programming
+whose every iterate is feasible. Work in progress of the jerk-limit issue: time-optimal, arms
+without joint damping; not yet used by :func:`~nearopt.plan`.
+
+The timing is b(s) = ṡ², C¹ in s, so that θ̈ = θ''b + θ'a (a = b'/2) is continuous and
+θ⃛ = √b · L with L = θ'''b + 3θ''a + θ'a' is bounded. On each segment [s_k, s_{k+1}] of the grid,
+σ = (s − s_k)/Δ_k:
+
+- inside, b is quadratic: the Bézier form (b_k, m_k, b_{k+1}), with the C¹ condition
+  (b_{k+1} − m_k)/Δ_k = (m_{k+1} − b_{k+1})/Δ_{k+1} at every inner knot;
+- the first and last segments leave and reach rest with a constant path jerk, s ∝ t³:
+  b = β σ^{4/3} (resp. β (1 − σ)^{4/3}), β = b_1 (resp. b_{N−1}), so that θ̇ = θ̈ = 0 at both
+  ends (a smooth start and stop) and each end segment takes 3Δ/√β.
+
+The grid includes the path's breakpoints, so that θ is one cubic polynomial on each segment (the
+paths of :mod:`nearopt.path` are piecewise cubic; a user's path must be too). Then every quantity
+but the torque is a polynomial in σ whose Bernstein coefficients are linear in the segment's
+variables, and bounds on the coefficients hold the quantity for all σ (a polynomial lies within
+the hull of its Bernstein coefficients):
+
+- speed: θ'_i² b (degree 6, written in degree 8) within v_i²;
+- acceleration: θ̈_i (degree 3, written in degree 4) within ±A_i;
+- jerk: b ≤ B_k on the segment (B_k ≥ its Bézier coefficients), and
+  |θ⃛_i| = √b |L_i| ≤ √B_k |L_i| ≤ j_i ⇐ the coefficients of L_i (degree 2, written in degree 4)
+  within ±j_i / √B_k: a convex function of B_k, bounded from below by its tangent at the previous
+  iterate's B̄_k — a convex restriction (the convex–concave procedure of Debrouwere et al.,
+  2013). Its solution is feasible for the true constraint and the previous iterate is feasible
+  for it, so every iterate holds the limits and the duration never increases;
+- torque: at the knots and the segments' midpoints only (stage 1's rows between the samples are
+  not built for this timing yet).
+
+The end segments' quantities are β^p times known functions of σ (speed and acceleration p = 1,
+jerk p = 3/2): each gives a bound on β. The duration Σ_k Δ_k ∫ dσ/√b is 4-point Gauss–Legendre
+quadrature inside (τ ≥ 1/√b as w ≤ √b, τ w ≥ 1: two second-order cones per point) and exact at
+the ends, solved by Clarabel.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from math import comb
+
+import clarabel
+import numpy as np
+import scipy.sparse as sp
+from numpy.typing import ArrayLike, NDArray
+
+from ..errors import ConfigurationError, SolverError
+from ..path import Path
+from ..robot import Robot
+
+__all__ = ["JerkTiming", "jerk_limited_timing"]
+
+MARGIN = 1e-6
+"""Every bound is tightened by this much (relative), so that the convex solver's tolerance
+leaves no excess."""
+
+
+def _bernstein(degree: int, sigma: NDArray[np.float64]) -> NDArray[np.float64]:
+    """B_r^d(σ), shape (len(σ), d + 1)."""
+    r = np.arange(degree + 1)
+    binomial = np.array([comb(degree, k) for k in r], dtype=float)
+    x = sigma[:, None]
+    return binomial * x**r * (1.0 - x) ** (degree - r)
+
+
+def _collocation(degree: int) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """Equidistant nodes in [0, 1] and the matrix taking a polynomial's values there to its
+    Bernstein coefficients of that degree."""
+    nodes = np.linspace(0.0, 1.0, degree + 1)
+    return nodes, np.linalg.inv(_bernstein(degree, nodes))
+
+
+_NODES4, _TO_B4 = _collocation(4)
+_NODES8, _TO_B8 = _collocation(8)
+_GAUSS_X, _GAUSS_W = np.polynomial.legendre.leggauss(4)
+_GAUSS_X, _GAUSS_W = 0.5 * (_GAUSS_X + 1.0), 0.5 * _GAUSS_W  # on [0, 1]
+
+
+@dataclass(frozen=True)
+class JerkTiming:
+    """A C¹ timing b(s) = ṡ² (see the module docstring).
+
+    Attributes
+    ----------
+    s
+        Knots [path units], shape (N + 1,).
+    b
+        b at the knots [(path units/s)²]; b_0 = b_N = 0.
+    m
+        The Bézier middle coefficients of the segments (unused, NaN, on the two end segments).
+    history
+        The duration after each convex program [s] (non-increasing, up to the convex solver's
+        tolerance); the timing is the shortest of them.
+    """
+
+    s: NDArray[np.float64]
+    b: NDArray[np.float64]
+    m: NDArray[np.float64]
+    history: tuple[float, ...]
+
+    @property
+    def iterations(self) -> int:
+        """Convex programs solved."""
+        return len(self.history)
+
+    def evaluate(self, s: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """b, a = b'/2 and a' = da/ds at the path parameters s (at a knot: the segment after
+        it), each of shape (len(s),)."""
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        last = self.s.size - 2
+        k = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, last)
+        d = self.s[k + 1] - self.s[k]
+        x = np.clip((s - self.s[k]) / d, 0.0, 1.0)
+        b0, b1, m = self.b[k], self.b[k + 1], np.nan_to_num(self.m[k])
+        b = (1 - x) ** 2 * b0 + 2 * x * (1 - x) * m + x**2 * b1
+        a = ((m - b0) * (1 - x) + (b1 - m) * x) / d
+        da = (b0 - 2 * m + b1) / d**2
+        for end, beta, r, sign in (
+            (k == 0, self.b[1], x, 1.0),
+            (k == last, self.b[last], 1.0 - x, -1.0),
+        ):
+            with np.errstate(divide="ignore", invalid="ignore"):
+                b = np.where(end, beta * r ** (4 / 3), b)
+                a = np.where(end, sign * (2 / 3) * beta * r ** (1 / 3) / d, a)
+                da = np.where(end, (2 / 9) * beta * r ** (-2 / 3) / d**2, da)
+        return b, a, da
+
+    def segment_times(self) -> NDArray[np.float64]:
+        """Each segment's duration [s]: 16-point Gauss–Legendre inside, exact at the ends."""
+        x, w = np.polynomial.legendre.leggauss(16)
+        x, w = 0.5 * (x + 1.0), 0.5 * w
+        d = np.diff(self.s)
+        b0, b1, m = self.b[:-1, None], self.b[1:, None], self.m[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            b = (1 - x) ** 2 * b0 + 2 * x * (1 - x) * m + x**2 * b1
+            times = d * np.sum(w / np.sqrt(b), axis=1)
+        times[0] = 3.0 * d[0] / np.sqrt(self.b[1])
+        times[-1] = 3.0 * d[-1] / np.sqrt(self.b[-2])
+        return times
+
+    @property
+    def duration(self) -> float:
+        """t_e [s]."""
+        return float(np.sum(self.segment_times()))
+
+    def time_at(self, s: ArrayLike) -> NDArray[np.float64]:
+        """t(s) [s]: when the motion reaches the path parameters s, shape (len(s),) (16-point
+        Gauss–Legendre on the part of the segment, exact on the end segments)."""
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        times = self.segment_times()
+        start = np.concatenate([[0.0], np.cumsum(times)])
+        last = self.s.size - 2
+        k = np.clip(np.searchsorted(self.s, s, side="right") - 1, 0, last)
+        d = self.s[k + 1] - self.s[k]
+        x = np.clip((s - self.s[k]) / d, 0.0, 1.0)
+        g, w = np.polynomial.legendre.leggauss(16)
+        g, w = 0.5 * (g + 1.0), 0.5 * w
+        y = x[:, None] * g[None, :]
+        b0, b1, m = self.b[k, None], self.b[k + 1, None], np.nan_to_num(self.m[k])[:, None]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            b = (1 - y) ** 2 * b0 + 2 * y * (1 - y) * m + y**2 * b1
+            part = d * x * np.sum(w / np.sqrt(b), axis=1)
+            part = np.where(k == 0, 3.0 * d * np.cbrt(x) / np.sqrt(self.b[1]), part)
+            rest = 3.0 * d * np.cbrt(1.0 - x) / np.sqrt(self.b[last])
+            part = np.where(k == last, times[last] - rest, part)
+        return start[k] + part
+
+
+def jerk_limited_timing(
+    robot: Robot,
+    path: Path,
+    jerk: ArrayLike,
+    *,
+    grid: int = 200,
+    acceleration: ArrayLike | None = None,
+    torque: bool = True,
+    max_iterations: int = 30,
+    tolerance: float = 1e-6,
+) -> JerkTiming:
+    """The time-optimal C¹ timing of ``path``, from rest to rest with θ̈ = 0 at both ends,
+    under the robot's speed limits, joint acceleration limits (``acceleration`` [rad/s²],
+    default the robot's), the jerk limits ``jerk`` [rad/s³] — these three for all t — and
+    (``torque``) its effort limits at the knots and the segments' midpoints.
+
+    Stops when an iteration shortens the motion by less than ``tolerance`` (relative) or after
+    ``max_iterations``.
+
+    Raises
+    ------
+    ConfigurationError
+        Jerk limits that are not positive, or ``torque`` on an arm with joint damping (not yet
+        supported).
+    SolverError
+        If a convex program fails.
+    """
+    n = robot.n
+    jerk = np.broadcast_to(np.asarray(jerk, dtype=float), (n,)).copy()
+    if np.any(np.isnan(jerk)) or np.any(jerk <= 0):
+        raise ConfigurationError(f"jerk limits must be > 0 [rad/s³], got {jerk.tolist()}")
+    acc = robot.limits.acceleration if acceleration is None else acceleration
+    acc = np.broadcast_to(np.asarray(acc, dtype=float), (n,)).copy()
+    if torque and np.any(robot.damping):
+        raise ConfigurationError(
+            "the jerk-limited timing holds torques of arms without joint damping only (so far)"
+        )
+    model = _Model(robot, path, _grid(path, grid), jerk, acc, torque)
+    bbar = model.first_linearisation()
+    history: list[float] = []
+    timing: JerkTiming | None = None
+    for _ in range(max_iterations):
+        b, m, big_b = model.solve(bbar)
+        duration = JerkTiming(model.s, b, m, ()).duration
+        history.append(duration)
+        if timing is None or duration < timing.duration:  # (equal up to the solver's 1e-8)
+            timing = JerkTiming(model.s, b, m, ())
+        if len(history) > 1 and history[-2] - duration <= tolerance * duration:
+            break
+        bbar = np.maximum(big_b, 1e-300)
+    assert timing is not None
+    return JerkTiming(timing.s, timing.b, timing.m, tuple(history))
+
+
+def _grid(path: Path, segments: int) -> NDArray[np.float64]:
+    """Uniform knots with the path's breakpoints added (unless one is closer to a knot than
+    1e-3 of a segment: then that knot moves onto it)."""
+    s = np.linspace(0.0, path.s_end, segments + 1)
+    for x in np.asarray(path.breakpoints, dtype=float):
+        k = int(np.argmin(np.abs(s - x)))
+        if abs(s[k] - x) <= 1e-3 * path.s_end / segments:
+            s[k] = x
+        else:
+            s = np.sort(np.append(s, x))
+    return s
+
+
+def _derivatives(path: Path, s0: NDArray, d: NDArray, nodes: NDArray) -> tuple[NDArray, ...]:
+    """θ', θ'', θ''' of each segment's cubic at the σ nodes, shape (N, P, n) each, from its
+    derivatives at the segment's midpoint (exact for a cubic; away from its breakpoints)."""
+    mid = s0 + 0.5 * d
+    p1, p2 = np.asarray(path(mid, 1)), np.asarray(path(mid, 2))
+    try:
+        p3 = np.asarray(path(mid, 3))  # type: ignore[arg-type]
+    except ValueError:  # a straight line: θ'' = θ''' = 0
+        p3 = np.zeros_like(p1)
+    u = ((nodes[None, :] - 0.5) * d[:, None])[..., None]  # (N, P, 1)
+    d1 = p1[:, None, :] + p2[:, None, :] * u + 0.5 * p3[:, None, :] * u**2
+    d2 = p2[:, None, :] + p3[:, None, :] * u
+    d3 = np.broadcast_to(p3[:, None, :], d1.shape)
+    return d1, d2, d3
+
+
+class _Rows:
+    """Rows h − A x ≥ 0 (or = 0) gathered block by block."""
+
+    def __init__(self) -> None:
+        self.rows: list[NDArray] = []
+        self.cols: list[NDArray] = []
+        self.vals: list[NDArray] = []
+        self.h: list[NDArray] = []
+        self.count = 0
+
+    def add(self, cols: NDArray, vals: NDArray, h: NDArray) -> slice:
+        """Rows with the coefficients vals[r, :] at the columns cols[r, :] (A) and h[r]; their
+        position."""
+        cols, vals = np.atleast_2d(cols), np.atleast_2d(vals)
+        cols, vals = np.broadcast_arrays(cols, vals)
+        h = np.broadcast_to(np.asarray(h, dtype=float), (cols.shape[0],))
+        at = self.count + np.arange(cols.shape[0])
+        self.rows.append(np.repeat(at, cols.shape[1]))
+        self.cols.append(cols.ravel())
+        self.vals.append(vals.ravel().astype(float))
+        self.h.append(h.copy())
+        self.count += cols.shape[0]
+        return slice(int(at[0]) if at.size else self.count, self.count)
+
+    def matrix(self, columns: int) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
+        if not self.rows:
+            return sp.csr_matrix((0, columns)), np.zeros(0)
+        a = sp.csr_matrix(
+            (np.concatenate(self.vals), (np.concatenate(self.rows), np.concatenate(self.cols))),
+            shape=(self.count, columns),
+        )
+        return a, np.concatenate(self.h)
+
+
+class _Model:
+    """The convex restriction at B̄ (see the module docstring): every row but the jerk rows'
+    B_k coefficients and bounds is built once."""
+
+    def __init__(
+        self,
+        robot: Robot,
+        path: Path,
+        s: NDArray[np.float64],
+        jerk: NDArray[np.float64],
+        acc: NDArray[np.float64],
+        torque: bool,
+    ) -> None:
+        self.s, self.d = s, np.diff(s)
+        self.jerk = jerk
+        big_n = self.d.size
+        if big_n < 4:
+            raise ConfigurationError(f"the jerk-limited timing needs ≥ 4 segments, got {big_n}")
+        # variables: b_0..b_N, m_0..m_{N−1}, B_0..B_{N−1}, τ and w (4 per segment)
+        self.ib = np.arange(big_n + 1)
+        self.im = big_n + 1 + np.arange(big_n)
+        self.iB = 2 * big_n + 1 + np.arange(big_n)
+        self.it = (3 * big_n + 1 + np.arange(4 * big_n)).reshape(big_n, 4)
+        self.iw = (7 * big_n + 1 + np.arange(4 * big_n)).reshape(big_n, 4)
+        self.nv = 11 * big_n + 1
+        inner = np.arange(1, big_n - 1)
+        self.inner = inner
+        d, lim = self.d, robot.limits
+        cols3 = np.stack([self.ib[inner], self.im[inner], self.ib[inner + 1]], axis=1)
+        self.cols3 = cols3
+        bern2_4 = _bernstein(2, _NODES4)  # b at the degree-4 nodes, (5, 3)
+        a_of = np.stack([-(1 - _NODES4), 1 - 2 * _NODES4, _NODES4], axis=1)  # Δ·a at the nodes
+        d1, d2, d3 = (x[inner] for x in _derivatives(path, s[:-1], d, _NODES4))
+        di = d[inner][:, None, None, None]
+        # L_i at the nodes, (K, 5, n, 3) → its Bernstein coefficients
+        values = (
+            d3[..., None] * bern2_4[None, :, None, :]
+            + 3 * d2[..., None] * a_of[None, :, None, :] / di
+            + d1[..., None] * np.array([1.0, -2.0, 1.0]) / di**2
+        )
+        self.l_coef = np.einsum("pq,kqnc->kpnc", _TO_B4, values)
+
+        self.eq = self._equalities()
+        ineq = _Rows()
+        one = np.ones((1, 1))
+        last = big_n - 1
+        # inner segments: 0 ≤ each Bézier coefficient ≤ B_k
+        for c in range(3):
+            ineq.add(cols3[:, c : c + 1], -1.0, 0.0)
+            ineq.add(np.stack([cols3[:, c], self.iB[inner]], axis=1), np.array([[1.0, -1.0]]), 0.0)
+        keep = 1.0 - MARGIN
+        # speed: θ'_i² b in degree 8
+        v1 = _derivatives(path, s[:-1], d, _NODES8)[0][inner]  # (K, 9, n)
+        bern2_8 = _bernstein(2, _NODES8)
+        speed = np.einsum("pq,kqnc->kpnc", _TO_B8, v1[..., None] ** 2 * bern2_8[None, :, None, :])
+        for j in np.flatnonzero(np.isfinite(lim.velocity)):
+            rows = speed[:, :, j, :].reshape(-1, 3)
+            ineq.add(np.repeat(cols3, 9, axis=0), rows, keep * lim.velocity[j] ** 2)
+        # acceleration: θ''b + θ'a in degree 4
+        accel = np.einsum(
+            "pq,kqnc->kpnc",
+            _TO_B4,
+            d2[..., None] * bern2_4[None, :, None, :] + d1[..., None] * a_of[None, :, None, :] / di,
+        )
+        for j in np.flatnonzero(np.isfinite(acc)):
+            rows = accel[:, :, j, :].reshape(-1, 3)
+            for sign in (1.0, -1.0):
+                ineq.add(np.repeat(cols3, 5, axis=0), sign * rows, keep * acc[j])
+        # the end segments: bounds on β
+        for k, beta, sign in ((0, self.ib[1], 1.0), (last, self.ib[last], -1.0)):
+            cap = keep * self._end_cap(robot, path, k, sign, acc)
+            if np.isfinite(cap):
+                ineq.add(np.array([[beta]]), one, cap)
+        if torque and np.any(np.isfinite(lim.effort_upper) | np.isfinite(lim.effort_lower)):
+            self._torque_rows(robot, path, ineq, keep)
+        self.fixed = ineq
+        # the jerk rows: [Bézier coefficients, B_k] ≤ rhs, coefficients of B_k and rhs per B̄
+        rows = []
+        for j in np.flatnonzero(np.isfinite(jerk)):
+            for sign in (1.0, -1.0):
+                coef = sign * self.l_coef[:, :, j, :]  # (K, 5, 3)
+                rows.append((j, coef.reshape(-1, 3)))
+        self.jerk_rows = rows
+        self.cones = self._cones()
+
+    def _equalities(self) -> _Rows:
+        """b_0 = b_N = 0, the unused variables of the end segments 0, and C¹ at the inner
+        knots (the end segments' power laws included)."""
+        big_n, d = self.d.size, self.d
+        eq = _Rows()
+        one = np.ones((1, 1))
+        pinned = [self.ib[0], self.ib[big_n], self.im[0], self.im[big_n - 1]]
+        pinned += [self.iB[0], self.iB[big_n - 1]]
+        pinned += [*self.it[[0, -1], 1:].ravel(), *self.iw[[0, -1], 1:].ravel()]
+        eq.add(np.array(pinned)[:, None], one, 0.0)
+        # C¹ at the inner knots
+        k = np.arange(2, big_n - 1)
+        eq.add(
+            np.stack([self.ib[k], self.im[k - 1], self.im[k]], axis=1),
+            np.stack([1 / d[k - 1] + 1 / d[k], -1 / d[k - 1], -1 / d[k]], axis=1),
+            0.0,
+        )
+        eq.add(
+            np.array([[self.ib[1], self.im[1]]]),
+            np.array([[4 / 3 / d[0] + 2 / d[1], -2 / d[1]]]),
+            0.0,
+        )
+        last = big_n - 1
+        eq.add(
+            np.array([[self.ib[last], self.im[last - 1]]]),
+            np.array([[4 / 3 / d[last] + 2 / d[last - 1], -2 / d[last - 1]]]),
+            0.0,
+        )
+        return eq
+
+    def _end_cap(self, robot: Robot, path: Path, k: int, sign: float, acc: NDArray) -> float:
+        """The largest β of end segment k under the speed, acceleration and jerk limits (its
+        quantities are β^p times functions of σ, their largest magnitudes from 401 points
+        and 0.1 % more)."""
+        d = self.d[k]
+        x = np.linspace(0.0, 1.0, 401)
+        x = x[1:] if sign > 0 else x[:-1]  # not at rest, where b = 0
+        r = x if sign > 0 else 1.0 - x
+        at = self.s[k] + x * d
+        q1, q2 = np.asarray(path(at, 1)), np.asarray(path(at, 2))
+        try:
+            q3 = np.asarray(path(at, 3))  # type: ignore[arg-type]
+        except ValueError:
+            q3 = np.zeros_like(q1)
+        r = r[:, None]
+        lim = robot.limits
+        caps = [np.inf]
+        with np.errstate(divide="ignore"):
+            speed = 1.001 * np.max(q1**2 * r ** (4 / 3), axis=0)
+            caps.append(float(np.min(lim.velocity**2 / speed)))
+            accel = 1.001 * np.max(
+                np.abs(q2 * r ** (4 / 3) + sign * q1 * (2 / 3) * r ** (1 / 3) / d), 0
+            )
+            caps.append(float(np.min(acc / accel)))
+            shape = (2 / 9) * q1 / d**2 + sign * 2 * q2 * r / d + q3 * r**2
+            jerk = 1.001 * np.max(np.abs(shape), axis=0)
+            caps.append(float(np.min((self.jerk / jerk) ** (2 / 3))))
+        return min(caps)
+
+    def _torque_rows(self, robot: Robot, path: Path, ineq: _Rows, keep: float) -> None:
+        """u = M θ' a + (M θ'' + C θ' θ') b + g within the effort limits at every knot and
+        segment midpoint (the rest positions θ0, θe excepted: u = g there, fixed)."""
+        big_n, last, d = self.d.size, self.d.size - 1, self.d
+        seg = np.concatenate([np.repeat(np.arange(big_n), 2), [last]])
+        sig = np.concatenate([np.tile([0.0, 0.5], big_n), [1.0]])
+        keep_sample = ~(((seg == 0) & (sig == 0.0)) | ((seg == last) & (sig == 1.0)))
+        seg, sig = seg[keep_sample], sig[keep_sample]
+        at = self.s[seg] + sig * d[seg]
+        q, q1, q2 = (np.asarray(path(at, order)) for order in (0, 1, 2))
+        zero = np.zeros_like(q1)
+        g = robot._rnea_columns(q, zero, zero)
+        m = robot._rnea_columns(q, zero, q1) - g
+        c = robot._rnea_columns(q, q1, q2) - g
+        lim = robot.limits
+        for p in range(seg.size):
+            k, x, dk = seg[p], sig[p], d[seg[p]]
+            if k == 0 or k == last:
+                r, sign = (x, 1.0) if k == 0 else (1.0 - x, -1.0)
+                cols = np.array([self.ib[1] if k == 0 else self.ib[last]])
+                bw = np.array([r ** (4 / 3)])
+                aw = np.array([sign * (2 / 3) * r ** (1 / 3) / dk])
+            else:
+                cols = np.array([self.ib[k], self.im[k], self.ib[k + 1]])
+                bw = np.array([(1 - x) ** 2, 2 * x * (1 - x), x**2])
+                aw = np.array([-(1 - x), 1 - 2 * x, x]) / dk
+            vals = m[p][:, None] * aw[None, :] + c[p][:, None] * bw[None, :]  # (n, cols)
+            for j in range(robot.n):
+                if np.isfinite(lim.effort_upper[j]):
+                    ineq.add(cols[None, :], vals[j][None, :], keep * lim.effort_upper[j] - g[p, j])
+                if np.isfinite(lim.effort_lower[j]):
+                    ineq.add(cols[None, :], -vals[j][None, :], g[p, j] - keep * lim.effort_lower[j])
+
+    def _cones(self) -> tuple[sp.csr_matrix, NDArray[np.float64], NDArray[np.float64]]:
+        """τ ≥ 1/√b at every quadrature point (two second-order cones of 3: ‖(2w, b − 1)‖ ≤
+        b + 1 and ‖(2, τ − w)‖ ≤ τ + w), and the objective Σ Δ w_q τ (3Δ τ at the ends)."""
+        last, d = self.d.size - 1, self.d
+        rows = _Rows()
+        objective = np.zeros(self.nv)
+        inner, ib = self.inner, self.ib
+        # the points: inner segments × 4 (b from 3 Bézier coefficients), then the 2 ends (β)
+        tau = np.concatenate([self.it[inner].ravel(), self.it[[0, last], 0]])
+        w = np.concatenate([self.iw[inner].ravel(), self.iw[[0, last], 0]])
+        b_cols = np.vstack(
+            [np.repeat(self.cols3, 4, axis=0), [[ib[1], ib[1], ib[1]], [ib[last]] * 3]]
+        )
+        b_vals = np.vstack(
+            [np.tile(_bernstein(2, _GAUSS_X), (inner.size, 1)), [[1.0, 0, 0], [1.0, 0, 0]]]
+        )
+        objective[tau] = np.concatenate(
+            [(d[inner][:, None] * _GAUSS_W[None, :]).ravel(), [3.0 * d[0], 3.0 * d[last]]]
+        )
+        points = tau.size
+        block = np.zeros((points, 6, 3), dtype=np.int64)  # columns of the 6 rows of a point
+        value = np.zeros((points, 6, 3))
+        bound = np.zeros((points, 6))
+        block[:, 0], value[:, 0], bound[:, 0] = b_cols, -b_vals, 1.0  # b + 1
+        block[:, 1, 0], value[:, 1, 0] = w, -2.0  # 2w
+        block[:, 2], value[:, 2], bound[:, 2] = b_cols, -b_vals, -1.0  # b − 1
+        block[:, 3, :2], value[:, 3, :2] = np.stack([tau, w], 1), -1.0  # τ + w
+        block[:, 4, 0], bound[:, 4] = tau, 2.0  # 2
+        block[:, 5, :2], value[:, 5, :2] = np.stack([tau, w], 1), [-1.0, 1.0]  # τ − w
+        rows.add(block.reshape(-1, 3), value.reshape(-1, 3), bound.ravel())
+        a, h = rows.matrix(self.nv)
+        objective[self.iB] = 1e-9 * float(np.sum(d))  # B_k no larger than its rows need
+        return a, h, objective
+
+    def first_linearisation(self) -> NDArray[np.float64]:
+        """B̄ at first: per segment, the b of a constant ṡ² that the speed, acceleration and
+        jerk limits allow at the segment's nodes (any B̄ > 0 gives a feasible restriction; a
+        good one fewer iterations)."""
+        peak = np.max(np.abs(self.l_coef.sum(axis=3)), axis=1)  # L of b ≡ 1: θ''', (K, n)
+        with np.errstate(divide="ignore"):
+            jcap = np.min((self.jerk / np.maximum(peak, 1e-300)) ** (2 / 3), axis=1)
+        bbar = np.ones(self.d.size)
+        bbar[self.inner] = np.clip(jcap, 1e-8, 1e6)
+        return bbar
+
+    def solve(
+        self, bbar: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
+        """The convex restriction at B̄: b at the knots, m, B."""
+        inner = self.inner
+        jerk_rows = _Rows()
+        bb = bbar[inner]
+        for j, coef in self.jerk_rows:
+            slope = np.repeat(0.5 * self.jerk[j] * bb**-1.5, 5)
+            rhs = np.repeat((1.0 - MARGIN) * 1.5 * self.jerk[j] / np.sqrt(bb), 5)
+            cols = np.hstack(
+                [np.repeat(self.cols3, 5, axis=0), np.repeat(self.iB[inner], 5)[:, None]]
+            )
+            jerk_rows.add(cols, np.hstack([coef, slope[:, None]]), rhs)
+        a_eq, h_eq = self.eq.matrix(self.nv)
+        a_fix, h_fix = self.fixed.matrix(self.nv)
+        a_jerk, h_jerk = jerk_rows.matrix(self.nv)
+        a_cone, h_cone, objective = self.cones
+        linear = sp.vstack([a_eq, a_fix, a_jerk]).tocsr()
+        h_linear = np.concatenate([h_eq, h_fix, h_jerk])
+        scale = 1.0 / np.maximum(abs(linear).max(axis=1).toarray().ravel(), 1e-300)
+        linear = sp.diags(scale) @ linear  # each row's largest coefficient 1
+        a = sp.vstack([linear, a_cone]).tocsc()
+        h = np.concatenate([h_linear * scale, h_cone])
+        cones = [
+            clarabel.ZeroConeT(a_eq.shape[0]),
+            clarabel.NonnegativeConeT(a_fix.shape[0] + a_jerk.shape[0]),
+        ] + [clarabel.SecondOrderConeT(3)] * (a_cone.shape[0] // 3)
+        settings = clarabel.DefaultSettings()
+        settings.verbose = False
+        solution = clarabel.DefaultSolver(
+            sp.csc_matrix((self.nv, self.nv)), objective, a, h, cones, settings
+        ).solve()
+        if str(solution.status) not in ("Solved", "AlmostSolved"):
+            raise SolverError(f"the jerk-limited timing's convex program: {solution.status}")
+        x = np.asarray(solution.x)
+        b = np.maximum(x[self.ib], 0.0)
+        b[0] = b[-1] = 0.0
+        m = x[self.im].copy()
+        m[[0, -1]] = np.nan
+        return b, m, x[self.iB]
