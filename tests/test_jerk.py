@@ -11,6 +11,7 @@ from conftest import load
 
 import nearopt
 from nearopt.timing import jerk_limited_timing, optimal_timing
+from nearopt.timing.jerk import SmoothTrajectory
 
 JERK, ACCELERATION = 50.0, 10.0
 
@@ -134,3 +135,30 @@ def test_within_one_percent_of_copp_topp3() -> None:
         a_lin, b_lin = np.maximum(np.asarray(profile.a), 1e-10), np.asarray(profile.b)
     theirs = copp.interpolation.s_to_t_topp3(sigma, profile)[0]
     assert timing.duration <= 1.01 * theirs
+
+
+def test_the_smooth_trajectory_in_time() -> None:
+    """SmoothTrajectory: s(t) inverts t(s) to rounding, θ̈ continuous, θ⃛ within the limit at
+    20 kHz in time (finite at rest), and a 1 kHz record replays itself with θ̈ linear between
+    samples: θ̇ and θ within j·dt²/4 and j·dt³/8 of the next sample (θ̈ is j-Lipschitz)."""
+    robot = _arm("ur5")
+    path = _spline(robot, 3)
+    timing = jerk_limited_timing(robot, path, JERK, grid=60)
+    motion = SmoothTrajectory(path, timing, robot.inverse_dynamics_batch)
+    assert motion.duration == pytest.approx(timing.duration, rel=1e-12)
+    s = np.linspace(0.0, path.s_end, 3001)
+    assert np.max(np.abs(motion.path_parameter(timing.time_at(s)) - s)) <= 1e-12
+    t = np.linspace(0.0, motion.duration, 20001)
+    jerk = motion.jerk(t)
+    assert np.all(np.isfinite(jerk)) and np.max(np.abs(jerk)) <= JERK
+    q, qd, qdd = motion.states(t)
+    assert np.max(np.abs(np.diff(qdd, axis=0))) <= JERK * np.max(np.diff(t)) * (1 + 1e-6)
+    np.testing.assert_allclose(qdd[[0, -1]], 0.0, atol=1e-2 * ACCELERATION)
+    record = motion.sample(1000.0)
+    dt = np.diff(record.t)[:, None]
+    qdd0, qdd1 = record.qdd[:-1], record.qdd[1:]
+    speed = record.qd[:-1] + 0.5 * dt * (qdd0 + qdd1)
+    position = record.q[:-1] + dt * record.qd[:-1] + dt**2 * (qdd0 / 3 + qdd1 / 6)
+    assert np.max(np.abs(speed - record.qd[1:])) <= JERK * 1e-6 / 4
+    assert np.max(np.abs(position - record.q[1:])) <= JERK * 1e-9 / 8
+    assert motion.faithful_rate() <= 1.0 / motion.duration * (1 + 1e-9)  # no phase to miss

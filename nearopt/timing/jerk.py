@@ -48,8 +48,9 @@ from numpy.typing import ArrayLike, NDArray
 from ..errors import ConfigurationError, SolverError
 from ..path import Path
 from ..robot import Robot
+from ..trajectory import InverseDynamics, Motion
 
-__all__ = ["JerkTiming", "jerk_limited_timing"]
+__all__ = ["JerkTiming", "SmoothTrajectory", "jerk_limited_timing"]
 
 MARGIN = 1e-6
 """Every bound is tightened by this much (relative), so that the convex solver's tolerance
@@ -547,3 +548,85 @@ class _Model:
         m = x[self.im].copy()
         m[[0, -1]] = np.nan
         return b, m, x[self.iB]
+
+
+class SmoothTrajectory(Motion):
+    """A path followed with a C¹ timing (:class:`JerkTiming`): θ̈ continuous, θ⃛ bounded.
+
+    Parameters
+    ----------
+    path
+        The spatial path θ(s).
+    timing
+        Its timing b(s).
+    inverse_dynamics
+        u(θ, θ̇, θ̈) for arrays of shape (M, n) (e.g. ``Robot.inverse_dynamics_batch``).
+    """
+
+    def __init__(self, path: Path, timing: JerkTiming, inverse_dynamics: InverseDynamics) -> None:
+        self.path, self.timing = path, timing
+        self.s = timing.s
+        self.t = np.concatenate([[0.0], np.cumsum(timing.segment_times())])
+        self.t.setflags(write=False)
+        self._inverse_dynamics = inverse_dynamics
+
+    @property
+    def dof(self) -> int:
+        """Number of joints n."""
+        return self.path.dof
+
+    def path_parameter(self, t: ArrayLike) -> NDArray[np.float64]:
+        """s(t) at the given times (clipped to [0, t_e]), shape (M,): in closed form on the end
+        segments, by safeguarded Newton steps on t(s) inside (to ~1e-14 of a segment)."""
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        timing, last = self.timing, self.s.size - 2
+        k = np.clip(np.searchsorted(self.t, t, side="right") - 1, 0, last)
+        d = self.s[k + 1] - self.s[k]
+        tau = t - self.t[k]
+        span = self.t[k + 1] - self.t[k]
+        lo, hi = np.zeros_like(t), np.ones_like(t)
+        x = np.clip(tau / span, 0.0, 1.0)
+        for _ in range(60):
+            s = self.s[k] + x * d
+            f = timing.time_at(s) - self.t[k] - tau  # increasing in x
+            lo, hi = np.where(f < 0, x, lo), np.where(f >= 0, x, hi)
+            speed = np.sqrt(np.maximum(timing.evaluate(s)[0], 0.0))
+            with np.errstate(divide="ignore", invalid="ignore"):
+                step = x - f * speed / d
+            bad = ~np.isfinite(step) | (step <= lo) | (step >= hi)
+            new = np.where(bad, 0.5 * (lo + hi), step)
+            if np.max(np.abs(new - x)) <= 1e-14:
+                x = new
+                break
+            x = new
+        beta0, beta1 = timing.b[1], timing.b[last]
+        first = 3.0 * d / np.sqrt(beta0)
+        x = np.where(k == 0, np.clip(tau / first, 0.0, 1.0) ** 3, x)
+        rest = np.clip((span - tau) / (3.0 * d / np.sqrt(beta1)), 0.0, 1.0)
+        x = np.where(k == last, 1.0 - rest**3, x)
+        return np.minimum(self.s[k] + x * d, self.s[-1])
+
+    def states(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """θ(t), θ̇(t), θ̈(t) in one pass, each of shape (M, n)."""
+        s = self.path_parameter(t)
+        b, a, _ = self.timing.evaluate(s)
+        d1 = self.path(s, 1)
+        return (
+            self.path(s, 0),
+            d1 * np.sqrt(b)[:, None],
+            self.path(s, 2) * b[:, None] + d1 * a[:, None],
+        )
+
+    def jerk(self, t: ArrayLike) -> NDArray[np.float64]:
+        """θ⃛(t) = √b (θ‴ b + 3θ″ a + θ′ a′) [rad/s³ or m/s³], shape (M, n)."""
+        s = self.path_parameter(t)
+        # at rest √b → 0 and a′ → ∞ with a finite product: its limit from just inside
+        ends = 1e-9 * np.diff(self.s)[[0, -1]]
+        s = np.clip(s, self.s[0] + ends[0], self.s[-1] - ends[1])
+        b, a, da = self.timing.evaluate(s)
+        try:
+            d3 = np.asarray(self.path(s, 3))  # type: ignore[arg-type]
+        except ValueError:
+            d3 = np.zeros((s.size, self.dof))
+        inner = d3 * b[:, None] + 3 * self.path(s, 2) * a[:, None] + self.path(s, 1) * da[:, None]
+        return np.sqrt(b)[:, None] * inner
