@@ -162,3 +162,30 @@ def test_the_smooth_trajectory_in_time() -> None:
     assert np.max(np.abs(speed - record.qd[1:])) <= JERK * 1e-6 / 4
     assert np.max(np.abs(position - record.q[1:])) <= JERK * 1e-9 / 8
     assert motion.faithful_rate() <= 1.0 / motion.duration * (1 + 1e-9)  # no phase to miss
+
+
+@pytest.mark.parametrize("name", ["xarm7", "z1"])
+def test_damped_arms_and_an_energy_cost(name: str) -> None:
+    """Joint damping's D θ' √b in the torque (a tangent where it is concave: still a
+    restriction) and f0 = 1 + β Σ u²: the torques at the samples within the limits, J of the
+    model equal to J integrated along the motion (adaptive Gauss–Kronrod, independent of the
+    model's quadrature), and no lower on the time-optimal jerk-limited timing of the same path
+    (which is the shorter one)."""
+    robot = load(name).with_limits(acceleration=ACCELERATION)
+    assert np.any(robot.damping)
+    path = _spline(robot, 1)
+    cost = nearopt.TorqueCost(1e-3)
+    energy = jerk_limited_timing(robot, path, JERK, cost, grid=80)
+    fastest = jerk_limited_timing(robot, path, JERK, grid=80)
+    motion = SmoothTrajectory(path, energy, robot.inverse_dynamics_batch)
+    other = SmoothTrajectory(path, fastest, robot.inverse_dynamics_batch)
+    J = motion.integrate(cost)
+    assert energy.history[-1] == pytest.approx(J, rel=1e-4)
+    assert J <= other.integrate(cost) * (1 + 1e-6)
+    assert fastest.duration <= energy.duration * (1 + 1e-6)
+    for timing, trajectory in ((energy, motion), (fastest, other)):
+        s = np.concatenate([timing.s, 0.5 * (timing.s[:-1] + timing.s[1:])])
+        s = s[(s > timing.s[1]) & (s < timing.s[-2])]
+        u = trajectory.torque(timing.time_at(s))
+        assert np.all(u <= robot.limits.effort_upper * (1 + 1e-9))
+        assert np.all(u >= robot.limits.effort_lower * (1 + 1e-9))

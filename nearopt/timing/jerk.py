@@ -45,6 +45,7 @@ import numpy as np
 import scipy.sparse as sp
 from numpy.typing import ArrayLike, NDArray
 
+from ..cost import Cost, TimeCost, TorqueCost
 from ..errors import ConfigurationError, SolverError
 from ..path import Path
 from ..robot import Robot
@@ -91,8 +92,8 @@ class JerkTiming:
     m
         The Bézier middle coefficients of the segments (unused, NaN, on the two end segments).
     history
-        The duration after each convex program [s] (non-increasing, up to the convex solver's
-        tolerance); the timing is the shortest of them.
+        J after each convex program, by the model's quadrature (time-optimal: the duration [s];
+        non-increasing, up to the convex solver's tolerance); the timing is the best of them.
     """
 
     s: NDArray[np.float64]
@@ -172,6 +173,7 @@ def jerk_limited_timing(
     robot: Robot,
     path: Path,
     jerk: ArrayLike,
+    cost: Cost | None = None,
     *,
     grid: int = 200,
     acceleration: ArrayLike | None = None,
@@ -179,19 +181,20 @@ def jerk_limited_timing(
     max_iterations: int = 30,
     tolerance: float = 1e-6,
 ) -> JerkTiming:
-    """The time-optimal C¹ timing of ``path``, from rest to rest with θ̈ = 0 at both ends,
-    under the robot's speed limits, joint acceleration limits (``acceleration`` [rad/s²],
-    default the robot's), the jerk limits ``jerk`` [rad/s³] — these three for all t — and
-    (``torque``) its effort limits at the knots and the segments' midpoints.
+    """The C¹ timing of ``path`` that minimises J = ∫ f0 dt (``cost``: time, the default, or
+    :class:`~nearopt.TorqueCost`'s 1 + Σ w u²), from rest to rest with θ̈ = 0 at both ends, under
+    the robot's speed limits, joint acceleration limits (``acceleration`` [rad/s²], default the
+    robot's), the jerk limits ``jerk`` [rad/s³] — these three for all t — and (``torque``) its
+    effort limits at the knots and the segments' midpoints, joint damping included (its D θ' √b,
+    where concave, by the tangent at the last iterate: every iterate stays feasible).
 
-    Stops when an iteration shortens the motion by less than ``tolerance`` (relative) or after
-    ``max_iterations``.
+    Stops when an iteration lowers J (by the model's quadrature) by less than ``tolerance``
+    (relative) or after ``max_iterations``.
 
     Raises
     ------
     ConfigurationError
-        Jerk limits that are not positive, or ``torque`` on an arm with joint damping (not yet
-        supported).
+        Jerk limits that are not positive, or another cost.
     SolverError
         If a convex program fails.
     """
@@ -201,25 +204,30 @@ def jerk_limited_timing(
         raise ConfigurationError(f"jerk limits must be > 0 [rad/s³], got {jerk.tolist()}")
     acc = robot.limits.acceleration if acceleration is None else acceleration
     acc = np.broadcast_to(np.asarray(acc, dtype=float), (n,)).copy()
-    if torque and np.any(robot.damping):
+    if cost is None or isinstance(cost, TimeCost):
+        weights = None
+    elif isinstance(cost, TorqueCost):
+        weights = cost.torque_weights(n)
+    else:
         raise ConfigurationError(
-            "the jerk-limited timing holds torques of arms without joint damping only (so far)"
+            "the jerk-limited timing minimises time (TimeCost) or 1 + Σ w u² (TorqueCost), "
+            f"got {type(cost).__name__}"
         )
-    model = _Model(robot, path, _grid(path, grid), jerk, acc, torque)
+    model = _Model(robot, path, _grid(path, grid), jerk, acc, torque, weights)
     bbar = model.first_linearisation()
     history: list[float] = []
-    timing: JerkTiming | None = None
+    best: tuple[float, NDArray[np.float64]] | None = None
+    x: NDArray[np.float64] | None = None
     for _ in range(max_iterations):
-        b, m, big_b = model.solve(bbar)
-        duration = JerkTiming(model.s, b, m, ()).duration
-        history.append(duration)
-        if timing is None or duration < timing.duration:  # (equal up to the solver's 1e-8)
-            timing = JerkTiming(model.s, b, m, ())
-        if len(history) > 1 and history[-2] - duration <= tolerance * duration:
+        x, value = model.solve(bbar, x)
+        history.append(value)
+        if best is None or value < best[0]:  # (equal up to the solver's 1e-8)
+            best = (value, x)
+        if len(history) > 1 and history[-2] - value <= tolerance * abs(value):
             break
-        bbar = np.maximum(big_b, 1e-300)
-    assert timing is not None
-    return JerkTiming(timing.s, timing.b, timing.m, tuple(history))
+        bbar = np.maximum(x[model.iB], 1e-300)
+    assert best is not None
+    return model.timing(best[1], tuple(history))
 
 
 def _grid(path: Path, segments: int) -> NDArray[np.float64]:
@@ -285,6 +293,30 @@ class _Rows:
         return a, np.concatenate(self.h)
 
 
+@dataclass(frozen=True)
+class _Points:
+    """Points of the path where the torque is needed: u = A x + g + δ √b, with b = bw · x[cols],
+    A x = (m aw + c bw) · x[cols] (per joint), δ = D θ' (the damping's share of u / √b).
+
+    ``root`` is what w ≤ √root bounds there: b itself inside, β on an end segment, where
+    √b = κ √β (κ = r^{2/3}); ``kappa`` is 1 inside."""
+
+    cols: NDArray[np.int64]  # (P, 3)
+    bw: NDArray[np.float64]  # (P, 3)
+    aw: NDArray[np.float64]  # (P, 3)
+    m: NDArray[np.float64]  # (P, n)
+    c: NDArray[np.float64]
+    g: NDArray[np.float64]
+    delta: NDArray[np.float64]
+    kappa: NDArray[np.float64]  # (P,)
+    root_w: NDArray[np.float64]  # (P, 3): root = root_w · x[cols]
+    seg: NDArray[np.int64]  # (P,)
+
+    def affine(self) -> NDArray[np.float64]:
+        """A: (P, n, 3)."""
+        return self.m[:, :, None] * self.aw[:, None, :] + self.c[:, :, None] * self.bw[:, None, :]
+
+
 class _Model:
     """The convex restriction at B̄ (see the module docstring): every row but the jerk rows'
     B_k coefficients and bounds is built once."""
@@ -297,6 +329,7 @@ class _Model:
         jerk: NDArray[np.float64],
         acc: NDArray[np.float64],
         torque: bool,
+        weights: NDArray[np.float64] | None = None,
     ) -> None:
         self.s, self.d = s, np.diff(s)
         self.jerk = jerk
@@ -358,8 +391,21 @@ class _Model:
             cap = keep * self._end_cap(robot, path, k, sign, acc)
             if np.isfinite(cap):
                 ineq.add(np.array([[beta]]), one, cap)
+        self.limits, self.weights = lim, weights
+        self.damped = bool(np.any(robot.damping))
+        self.tq: _Points | None = None
         if torque and np.any(np.isfinite(lim.effort_upper) | np.isfinite(lim.effort_lower)):
-            self._torque_rows(robot, path, ineq, keep)
+            self.tq = self._torque_points(robot, path)
+            if self.damped:  # w ≤ √b at every torque point
+                self.iwt = self.nv + np.arange(self.tq.seg.size)
+                self.nv += self.tq.seg.size
+            else:
+                self._torque_rows(ineq, np.ones(self.tq.seg.size))
+        self.cp: _Points | None = None
+        if weights is not None:
+            self.cp = self._cost_points(robot, path)
+            self.ieps = self.nv + np.arange(self.cp.seg.size)
+            self.nv += self.cp.seg.size
         self.fixed = ineq
         # the jerk rows: [Bézier coefficients, B_k] ≤ rhs, coefficients of B_k and rhs per B̄
         rows = []
@@ -429,40 +475,98 @@ class _Model:
             caps.append(float(np.min((self.jerk / jerk) ** (2 / 3))))
         return min(caps)
 
-    def _torque_rows(self, robot: Robot, path: Path, ineq: _Rows, keep: float) -> None:
-        """u = M θ' a + (M θ'' + C θ' θ') b + g within the effort limits at every knot and
-        segment midpoint (the rest positions θ0, θe excepted: u = g there, fixed)."""
+    def _points(self, robot: Robot, path: Path, seg: NDArray, x: NDArray) -> _Points:
+        """The torque's pieces at σ = x on segments seg (on an end segment x is the distance
+        from the knot next to it in σ, ..., see :class:`_Points`)."""
         big_n, last, d = self.d.size, self.d.size - 1, self.d
-        seg = np.concatenate([np.repeat(np.arange(big_n), 2), [last]])
-        sig = np.concatenate([np.tile([0.0, 0.5], big_n), [1.0]])
-        keep_sample = ~(((seg == 0) & (sig == 0.0)) | ((seg == last) & (sig == 1.0)))
-        seg, sig = seg[keep_sample], sig[keep_sample]
-        at = self.s[seg] + sig * d[seg]
+        cols = np.stack([self.ib[seg], self.im[seg], self.ib[np.minimum(seg + 1, big_n)]], 1)
+        dk = d[seg][:, None]
+        bw = np.stack([(1 - x) ** 2, 2 * x * (1 - x), x**2], axis=1)
+        aw = np.stack([-(1 - x), 1 - 2 * x, x], axis=1) / dk
+        root_w, kappa = bw.copy(), np.ones(seg.size)
+        for end, beta, sign in ((seg == 0, self.ib[1], 1.0), (seg == last, self.ib[last], -1.0)):
+            r = x[end] if sign > 0 else 1.0 - x[end]
+            cols[end] = beta
+            zero = np.zeros_like(r)
+            bw[end] = np.stack([r ** (4 / 3), zero, zero], 1)
+            aw[end] = np.stack([sign * (2 / 3) * r ** (1 / 3), zero, zero], 1) / dk[end]
+            root_w[end] = np.stack([np.ones_like(r), zero, zero], 1)
+            kappa[end] = r ** (2 / 3)
+        at = self.s[seg] + x * d[seg]
         q, q1, q2 = (np.asarray(path(at, order)) for order in (0, 1, 2))
         zero = np.zeros_like(q1)
         g = robot._rnea_columns(q, zero, zero)
-        m = robot._rnea_columns(q, zero, q1) - g
-        c = robot._rnea_columns(q, q1, q2) - g
-        lim = robot.limits
-        for p in range(seg.size):
-            k, x, dk = seg[p], sig[p], d[seg[p]]
-            if k == 0 or k == last:
-                r, sign = (x, 1.0) if k == 0 else (1.0 - x, -1.0)
-                cols = np.array([self.ib[1] if k == 0 else self.ib[last]])
-                bw = np.array([r ** (4 / 3)])
-                aw = np.array([sign * (2 / 3) * r ** (1 / 3) / dk])
-            else:
-                cols = np.array([self.ib[k], self.im[k], self.ib[k + 1]])
-                bw = np.array([(1 - x) ** 2, 2 * x * (1 - x), x**2])
-                aw = np.array([-(1 - x), 1 - 2 * x, x]) / dk
-            vals = m[p][:, None] * aw[None, :] + c[p][:, None] * bw[None, :]  # (n, cols)
-            for j in range(robot.n):
-                if np.isfinite(lim.effort_upper[j]):
-                    ineq.add(cols[None, :], vals[j][None, :], keep * lim.effort_upper[j] - g[p, j])
-                if np.isfinite(lim.effort_lower[j]):
-                    ineq.add(cols[None, :], -vals[j][None, :], g[p, j] - keep * lim.effort_lower[j])
+        return _Points(
+            cols,
+            bw,
+            aw,
+            robot._rnea_columns(q, zero, q1) - g,
+            robot._rnea_columns(q, q1, q2) - g,
+            g,
+            robot.damping * q1,
+            kappa,
+            root_w,
+            seg,
+        )
 
-    def _cones(self) -> tuple[sp.csr_matrix, NDArray[np.float64], NDArray[np.float64]]:
+    def _cost_points(self, robot: Robot, path: Path) -> _Points:
+        """The quadrature points of ∫ Σ w_j u_j² / √b ds: 4-point Gauss–Legendre inside; on an
+        end segment in y, σ = y³ (resp. 1 − σ = y³), which takes away the 1/σ^{2/3}."""
+        big_n = self.d.size
+        inner = self.inner
+        seg = np.concatenate([np.repeat(inner, 4), [0] * 4, [big_n - 1] * 4])
+        y3 = _GAUSS_X**3
+        x = np.concatenate([np.tile(_GAUSS_X, inner.size), y3, 1.0 - y3])
+        points = self._points(robot, path, seg, x)
+        d = self.d[seg]
+        self.cost_omega = (
+            np.concatenate([np.tile(_GAUSS_W, inner.size), 3.0 * _GAUSS_W, 3.0 * _GAUSS_W]) * d
+        )
+        self.cost_root = np.concatenate(
+            [self.iw[inner].ravel(), [self.iw[0, 0]] * 4, [self.iw[big_n - 1, 0]] * 4]
+        )
+        return points
+
+    def _torque_points(self, robot: Robot, path: Path) -> _Points:
+        """The knots and the segments' midpoints, but the rest positions (u = g there)."""
+        big_n = self.d.size
+        seg = np.concatenate([np.repeat(np.arange(big_n), 2), [big_n - 1]])
+        sig = np.concatenate([np.tile([0.0, 0.5], big_n), [1.0]])
+        keep = ~(((seg == 0) & (sig == 0.0)) | ((seg == big_n - 1) & (sig == 1.0)))
+        return self._points(robot, path, seg[keep], sig[keep])
+
+    def _torque_rows(self, rows: _Rows, bbar: NDArray[np.float64]) -> None:
+        """u within the effort limits at the torque points: A x + δ√b ≤ U − g and the lower
+        side; δ√b, where it is concave on the side bounded, by its tangent at b̄ (the last
+        iterate's b there: an upper bound, so the row is a restriction), else through
+        w ≤ √root (then exact)."""
+        pts, lim, keep = self.tq, self.limits, 1.0 - MARGIN
+        a = pts.affine()  # (P, n, 3)
+        root_b = np.maximum(bbar, 1e-300)
+        for sign, bound in ((1.0, lim.effort_upper), (-1.0, -lim.effort_lower)):
+            finite = np.isfinite(bound)
+            for j in np.flatnonzero(finite):
+                delta = sign * pts.delta[:, j] * pts.kappa  # its share of sign·u / √root
+                vals = sign * a[:, j, :]
+                h = keep * bound[j] - sign * pts.g[:, j]
+                if not np.any(delta):
+                    rows.add(pts.cols, vals, h)
+                    continue
+                concave = delta > 0
+                # concave: δ√r ≤ δ(√r̄ + (r − r̄)/(2√r̄)) with r = root_w · x
+                rbar = root_b
+                tangent = vals + (delta / (2 * np.sqrt(rbar)))[:, None] * pts.root_w
+                h_tangent = h - delta * np.sqrt(rbar) / 2
+                rows.add(pts.cols[concave], tangent[concave], h_tangent[concave])
+                # convex: δ√r = −|δ|√r ≤ −|δ| w with w ≤ √r
+                w = self.iwt[~concave][:, None]
+                rows.add(
+                    np.hstack([pts.cols[~concave], w]),
+                    np.hstack([vals[~concave], delta[~concave][:, None]]),
+                    h[~concave],
+                )
+
+    def _cones(self) -> tuple[sp.csr_matrix, NDArray[np.float64], NDArray[np.float64], list]:
         """τ ≥ 1/√b at every quadrature point (two second-order cones of 3: ‖(2w, b − 1)‖ ≤
         b + 1 and ‖(2, τ − w)‖ ≤ τ + w), and the objective Σ Δ w_q τ (3Δ τ at the ends)."""
         last, d = self.d.size - 1, self.d
@@ -492,9 +596,54 @@ class _Model:
         block[:, 4, 0], bound[:, 4] = tau, 2.0  # 2
         block[:, 5, :2], value[:, 5, :2] = np.stack([tau, w], 1), [-1.0, 1.0]  # τ − w
         rows.add(block.reshape(-1, 3), value.reshape(-1, 3), bound.ravel())
+        if self.tq is not None and self.damped:  # ‖(2w, r − 1)‖ ≤ r + 1 at every torque point
+            pts, count = self.tq, self.tq.seg.size
+            block = np.zeros((count, 3, 3), dtype=np.int64)
+            value = np.zeros((count, 3, 3))
+            block[:, 0], value[:, 0] = pts.cols, -pts.root_w
+            block[:, 1, 0], value[:, 1, 0] = self.iwt, -2.0
+            block[:, 2], value[:, 2] = pts.cols, -pts.root_w
+            bound = np.tile([1.0, 0.0, -1.0], count)
+            rows.add(block.reshape(-1, 3), value.reshape(-1, 3), bound)
         a, h = rows.matrix(self.nv)
+        cones = [clarabel.SecondOrderConeT(3)] * (a.shape[0] // 3)
         objective[self.iB] = 1e-9 * float(np.sum(d))  # B_k no larger than its rows need
-        return a, h, objective
+        if self.cp is not None:
+            a_cost, h_cost, linear = self._cost_cones()
+            a, h = sp.vstack([a, a_cost]), np.concatenate([h, h_cost])
+            cones += [clarabel.SecondOrderConeT(self.cp.m.shape[1] + 2)] * self.cp.seg.size
+            objective += linear
+        return a.tocsr(), h, objective, cones
+
+    def _cost_cones(self) -> tuple[sp.csr_matrix, NDArray[np.float64], NDArray[np.float64]]:
+        """Σ_j w_j (A_j x + g_j)² ≤ ε ρ at every cost point (ρ ≤ √root: ε ≥ the undamped
+        part of Σ w u² / √b), as ‖(2√w_j (A_j x + g_j), ε − ρ)‖ ≤ ε + ρ; and the objective's
+        linear part: Σ ω (ε + 2 Σ_j w_j δ_j κ A_j x)."""
+        pts, w = self.cp, self.weights
+        count, n = pts.seg.size, pts.m.shape[1]
+        a_aff = pts.affine()  # (P, n, 3)
+        root_w = np.sqrt(w)
+        rows = _Rows()
+        width = n + 2
+        block = np.zeros((count, width, 3), dtype=np.int64)
+        value = np.zeros((count, width, 3))
+        bound = np.zeros((count, width))
+        eps, rho = self.ieps, self.cost_root
+        block[:, 0, :2], value[:, 0, :2] = np.stack([eps, rho], 1), -1.0
+        block[:, 1 : n + 1] = pts.cols[:, None, :]
+        value[:, 1 : n + 1] = -2.0 * root_w[None, :, None] * a_aff
+        bound[:, 1 : n + 1] = 2.0 * root_w[None, :] * pts.g
+        block[:, n + 1, :2], value[:, n + 1, :2] = np.stack([eps, rho], 1), [-1.0, 1.0]
+        rows.add(block.reshape(-1, 3), value.reshape(-1, 3), bound.ravel())
+        a, h = rows.matrix(self.nv)
+        linear = np.zeros(self.nv)
+        np.add.at(linear, eps, self.cost_omega)
+        share = 2.0 * np.einsum("pn,pnc->pc", w * pts.delta * pts.kappa[:, None], a_aff)
+        np.add.at(linear, pts.cols.ravel(), (self.cost_omega[:, None] * share).ravel())
+        self.cost_constant = float(
+            np.sum(self.cost_omega * 2.0 * np.sum(w * pts.delta * pts.g, axis=1) * pts.kappa)
+        )
+        return a, h, linear
 
     def first_linearisation(self) -> NDArray[np.float64]:
         """B̄ at first: per segment, the b of a constant ṡ² that the speed, acceleration and
@@ -507,12 +656,29 @@ class _Model:
         bbar[self.inner] = np.clip(jcap, 1e-8, 1e6)
         return bbar
 
+    def roots(self, points: _Points, x: NDArray[np.float64] | None, bbar: NDArray) -> NDArray:
+        """The root (b inside, β at the ends) at the points: the last iterate's, or at first B̄
+        of their segment (any positive value keeps every row a restriction)."""
+        if x is None:  # the neighbouring inner segment's B̄ on an end segment
+            seg = np.clip(points.seg, 1, self.d.size - 2)
+            first = bbar[seg]
+            if self.damped:  # small enough that the tangent leaves the torque room at b → 0
+                lim = self.limits
+                room = np.minimum(lim.effort_upper - points.g, points.g - lim.effort_lower)
+                with np.errstate(divide="ignore", invalid="ignore"):
+                    cap = np.min((np.maximum(room, 0.0) / np.abs(points.delta)) ** 2, axis=1)
+                first = np.minimum(first, np.where(np.isfinite(cap), cap, first))
+            return np.maximum(first, 1e-12)
+        return np.maximum(np.einsum("pc,pc->p", points.root_w, x[points.cols]), 1e-12)
+
     def solve(
-        self, bbar: NDArray[np.float64]
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64], NDArray[np.float64]]:
-        """The convex restriction at B̄: b at the knots, m, B."""
+        self, bbar: NDArray[np.float64], previous: NDArray[np.float64] | None = None
+    ) -> tuple[NDArray[np.float64], float]:
+        """The convex restriction at B̄ (and, for a damped arm's torques and an energy cost,
+        at the previous solution's b): the solution vector and the objective (J by the
+        model's quadrature, a majorant of it where the damping enters)."""
         inner = self.inner
-        jerk_rows = _Rows()
+        per_iteration = _Rows()
         bb = bbar[inner]
         for j, coef in self.jerk_rows:
             slope = np.repeat(0.5 * self.jerk[j] * bb**-1.5, 5)
@@ -520,21 +686,39 @@ class _Model:
             cols = np.hstack(
                 [np.repeat(self.cols3, 5, axis=0), np.repeat(self.iB[inner], 5)[:, None]]
             )
-            jerk_rows.add(cols, np.hstack([coef, slope[:, None]]), rhs)
+            per_iteration.add(cols, np.hstack([coef, slope[:, None]]), rhs)
+        if self.tq is not None and self.damped:
+            self._torque_rows(per_iteration, self.roots(self.tq, previous, bbar))
         a_eq, h_eq = self.eq.matrix(self.nv)
         a_fix, h_fix = self.fixed.matrix(self.nv)
-        a_jerk, h_jerk = jerk_rows.matrix(self.nv)
-        a_cone, h_cone, objective = self.cones
-        linear = sp.vstack([a_eq, a_fix, a_jerk]).tocsr()
-        h_linear = np.concatenate([h_eq, h_fix, h_jerk])
+        a_it, h_it = per_iteration.matrix(self.nv)
+        a_cone, h_cone, objective, cone_list = self.cones
+        objective = objective.copy()
+        if self.cp is not None and self.damped:  # Σ ω w_j δ_j² κ² √root by its tangent
+            pts = self.cp
+            rbar = self.roots(pts, previous, bbar)
+            c = self.cost_omega * np.sum(self.weights * pts.delta**2, axis=1) * pts.kappa**2
+            np.add.at(
+                objective,
+                pts.cols.ravel(),
+                ((c / (2 * np.sqrt(rbar)))[:, None] * pts.root_w).ravel(),
+            )
+            offset = float(np.sum(c * np.sqrt(rbar) / 2))
+        else:
+            offset = 0.0
+        if self.cp is not None:
+            offset += self.cost_constant  # Σ ω 2 Σ w δ κ g: no variable in it
+        linear = sp.vstack([a_eq, a_fix, a_it]).tocsr()
+        h_linear = np.concatenate([h_eq, h_fix, h_it])
         scale = 1.0 / np.maximum(abs(linear).max(axis=1).toarray().ravel(), 1e-300)
         linear = sp.diags(scale) @ linear  # each row's largest coefficient 1
         a = sp.vstack([linear, a_cone]).tocsc()
         h = np.concatenate([h_linear * scale, h_cone])
         cones = [
             clarabel.ZeroConeT(a_eq.shape[0]),
-            clarabel.NonnegativeConeT(a_fix.shape[0] + a_jerk.shape[0]),
-        ] + [clarabel.SecondOrderConeT(3)] * (a_cone.shape[0] // 3)
+            clarabel.NonnegativeConeT(a_fix.shape[0] + a_it.shape[0]),
+            *cone_list,
+        ]
         settings = clarabel.DefaultSettings()
         settings.verbose = False
         solution = clarabel.DefaultSolver(
@@ -542,12 +726,14 @@ class _Model:
         ).solve()
         if str(solution.status) not in ("Solved", "AlmostSolved"):
             raise SolverError(f"the jerk-limited timing's convex program: {solution.status}")
-        x = np.asarray(solution.x)
+        return np.asarray(solution.x), float(solution.obj_val) + offset
+
+    def timing(self, x: NDArray[np.float64], history: tuple[float, ...]) -> JerkTiming:
         b = np.maximum(x[self.ib], 0.0)
         b[0] = b[-1] = 0.0
         m = x[self.im].copy()
         m[[0, -1]] = np.nan
-        return b, m, x[self.iB]
+        return JerkTiming(self.s, b, m, history)
 
 
 class SmoothTrajectory(Motion):
