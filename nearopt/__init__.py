@@ -31,7 +31,6 @@ from .errors import (
     CollisionError,
     ConfigurationError,
     InfeasiblePathError,
-    LimitWarning,
     NearoptError,
     RobotNotFoundError,
     SamplingWarning,
@@ -118,7 +117,6 @@ __all__ = [
     "TaskError",
     "UnreachablePoseError",
     "SamplingWarning",
-    "LimitWarning",
 ]
 
 __version__ = "0.1.0"

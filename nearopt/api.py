@@ -29,7 +29,7 @@ import numpy as np
 
 from .collision import Mesh, Scene
 from .cost import Cost, TimeCost, TorqueCost
-from .errors import ConfigurationError, LimitWarning, SamplingWarning
+from .errors import ConfigurationError, SamplingWarning
 from .planning import (
     METHODS,
     Iteration,
@@ -99,8 +99,9 @@ class PlanRequest:
         The arm: a known name, or a URDF file (exactly one).
     lock, tip, base, srdf, group, lock_at
         Which joints of a URDF are planned for (``lock_at``: ``"JOINT=VALUE"`` strings [rad or m]).
-    effort_limit, velocity_limit, acceleration_limit
-        Limits overriding the URDF's: one value or one per joint [N·m or N; rad/s; rad/s²].
+    effort_limit, velocity_limit, acceleration_limit, jerk_limit
+        Limits overriding the URDF's: one value or one per joint [N·m or N; rad/s; rad/s²;
+        rad/s³].
     velocity_scale
         A factor on every joint speed limit.
     joint_limits
@@ -136,6 +137,7 @@ class PlanRequest:
     velocity_limit: tuple[float, ...] | None = None
     velocity_scale: float | None = None
     acceleration_limit: tuple[float, ...] | None = None
+    jerk_limit: tuple[float, ...] | None = None
     joint_limits: str | None = None
     q0: tuple[float, ...] | None = None
     qe: tuple[float, ...] | None = None
@@ -377,6 +379,7 @@ _KINDS: dict[str, _Kind] = {
     "velocity_limit": _Kind.NUMBERS,
     "velocity_scale": _Kind.NUMBER,
     "acceleration_limit": _Kind.NUMBERS,
+    "jerk_limit": _Kind.NUMBERS,
     "joint_limits": _Kind.TEXT,
     "q0": _Kind.NUMBERS,
     "qe": _Kind.NUMBERS,
@@ -629,19 +632,7 @@ def solve(
     segment_callback: Callable[[int, Iteration], None] | None = None,
 ) -> PlanResult | TaskResult:
     """Plan a prepared request: :func:`~nearopt.plan`, or :func:`~nearopt.plan_task` for a task
-    (``segment_callback(k, iteration)`` then). The limits the planner does not hold
-    (:meth:`~nearopt.Robot.unheld_limits`) are not warned of here: the entry points say them
-    once (the command before planning, :func:`run` in its notes)."""
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", LimitWarning)
-        return _solve(prepared, callback, segment_callback)
-
-
-def _solve(
-    prepared: Prepared,
-    callback: Callable[[Iteration], None] | None,
-    segment_callback: Callable[[int, Iteration], None] | None,
-) -> PlanResult | TaskResult:
+    (``segment_callback(k, iteration)`` then)."""
     request = prepared.request
     settings = PlanSettings(
         method=request.method,
@@ -718,8 +709,7 @@ def run(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Outcom
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always", SamplingWarning)
         check_sampling(result, request.rate)
-    unheld = prepared.robot.unheld_limits()
-    notes = tuple(dict.fromkeys([*([unheld] if unheld else []), *(str(w.message) for w in caught)]))
+    notes = tuple(dict.fromkeys(str(w.message) for w in caught))
     return Outcome(result, report, notes, prepared)
 
 
@@ -789,6 +779,7 @@ def _robot(request: PlanRequest, loader: RobotLoader | None = None) -> Robot:
         ("effort_limit", "effort"),
         ("velocity_limit", "velocity"),
         ("acceleration_limit", "acceleration"),
+        ("jerk_limit", "jerk"),
     ):
         values = getattr(request, option)
         if values is not None:

@@ -253,6 +253,15 @@ def _planner_options(p: argparse.ArgumentParser) -> None:
         "or one per joint (default: the URDF's, URDF 1.2 <limit acceleration=...>; else none)",
     )
     p.add_argument(
+        "--jerk-limit",
+        nargs="+",
+        type=float,
+        metavar="J",
+        help="joint jerk limits |qddd| <= J [rad/s³], one value or one per joint (default: the "
+        "URDF's or --joint-limits'; else none): the path found is timed under them, C¹ with "
+        "qdd = 0 at rest",
+    )
+    p.add_argument(
         "--joint-limits",
         metavar="FILE",
         help="MoveIt's joint_limits.yaml: its declared speed, acceleration, jerk, effort and "
@@ -393,9 +402,6 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     prepared = prepare(request)
     refuse_inputs(outputs, prepared.input_files())
     quiet = args.quiet or args.stage1_only
-    unheld = prepared.robot.unheld_limits()
-    if unheld is not None:
-        print(f"nearopt: warning: {unheld}", file=sys.stderr)
 
     def progress(entry: Iteration) -> None:
         print(_format(entry), file=out, flush=True)
@@ -469,6 +475,8 @@ def _print_summary(result: PlanResult | TaskResult, out: TextIO) -> None:
             first = "first path, from OMPL"
         else:
             first = "first path"
+        if result.jerk_timing is not None:  # its J is stage 1's, without them
+            first += " without the jerk limits"
         print(
             f"{result.status}: J = {result.J:.6f} ({first} {result.initial.J:.6f}), "
             f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "

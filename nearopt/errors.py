@@ -19,7 +19,6 @@ __all__ = [
     "SolverError",
     "VerificationError",
     "SamplingWarning",
-    "LimitWarning",
 ]
 
 
@@ -218,10 +217,6 @@ class VerificationError(NearoptError):
     def __init__(self, message: str, report: object) -> None:
         super().__init__(message)
         self.report = report
-
-
-class LimitWarning(UserWarning):
-    """Limits the robot declares that the planner does not hold (its jerk limits, for now)."""
 
 
 class SamplingWarning(UserWarning):

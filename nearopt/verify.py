@@ -435,13 +435,17 @@ class _Sampled:
     qd: NDArray[np.float64]
     qdd: NDArray[np.float64]
     u: NDArray[np.float64]
+    qddd: NDArray[np.float64] | None = None  # where the robot has jerk limits and the motion a jerk
 
     @classmethod
     def at(
         cls, trajectory: Motion, robot: Robot, pool: pin.ModelPool, t: NDArray[np.float64]
     ) -> _Sampled:
         q, qd, qdd = trajectory.states(t)
-        return cls(t, q, qd, qdd, _torques(robot, pool, q, qd, qdd))
+        jerk = None
+        if np.any(np.isfinite(robot.limits.jerk)) and hasattr(trajectory, "jerk"):
+            jerk = trajectory.jerk(t)
+        return cls(t, q, qd, qdd, _torques(robot, pool, q, qd, qdd), jerk)
 
 
 def _torques(
@@ -550,6 +554,19 @@ def _limit_checks(
                 -lim.acceleration,
                 lim.acceleration,
                 lim.acceleration,
+                tol.limit,
+                "relative",
+            )
+        )
+    if np.any(np.isfinite(lim.jerk)):
+        jerk = motion.qddd  # none: θ̈ jumps at the knots of a stage-1 timing, θ⃛ is unbounded
+        rows.append(
+            (
+                "joint jerk limits",
+                np.full_like(motion.qdd, np.inf) if jerk is None else jerk,
+                -lim.jerk,
+                lim.jerk,
+                lim.jerk,
                 tol.limit,
                 "relative",
             )

@@ -10,7 +10,7 @@ import pytest
 from conftest import load
 
 import nearopt
-from nearopt.timing import jerk_limited_timing, optimal_timing
+from nearopt.timing import jerk_limited_timing, optimal_timing, time_with_jerk_limits
 from nearopt.timing.jerk import SmoothTrajectory
 
 JERK, ACCELERATION = 50.0, 10.0
@@ -189,3 +189,18 @@ def test_damped_arms_and_an_energy_cost(name: str) -> None:
         u = trajectory.torque(timing.time_at(s))
         assert np.all(u <= robot.limits.effort_upper * (1 + 1e-9))
         assert np.all(u >= robot.limits.effort_lower * (1 + 1e-9))
+
+
+def test_a_plan_with_jerk_limits_returns_the_better_path_under_them() -> None:
+    """Stage 2 does not know the jerk limits yet: plan times both its first path and the path
+    it found under them and returns the one of lower J, verified (the jerk included)."""
+    robot = nearopt.Robot.from_name("ur5").with_limits(jerk=30.0)
+    q0, qe = np.array([0, -1.5, 1.5, 0, 0, 0.0]), np.array([1.5, -1, 1, 0.5, 0.5, 0.5])
+    result = nearopt.plan(robot, q0, qe, nearopt.TimeCost(), max_iterations=4, grid=80)
+    assert isinstance(result.trajectory, SmoothTrajectory)
+    first = time_with_jerk_limits(robot, result.initial.trajectory.path, result.cost, grid=80)
+    assert result.J <= first.J * (1 + 1e-9)
+    assert result.J > result.timing.J  # stage 1's timing of the path, without the jerk limits
+    report = nearopt.verify_plan(result)
+    assert report.passed, report
+    assert "joint jerk limits" in {c.name for c in report.checks}

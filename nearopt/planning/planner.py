@@ -19,7 +19,6 @@ update (stage 2) is one of :class:`~nearopt.planning.Method`:
 from __future__ import annotations
 
 import time
-import warnings
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -30,14 +29,19 @@ from ..collision import Clearance, CollisionModel, Scene, collisions_for
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import (
     ConfigurationError,
-    LimitWarning,
     SolverError,
     UnreachablePoseError,
 )
 from ..path import Path
 from ..robot import Robot
 from ..robot.kinematics import ToolPose, inverse_kinematics
-from ..timing import MAX_GRID, TimingResult, optimal_timing
+from ..timing import (
+    MAX_GRID,
+    JerkTimingResult,
+    TimingResult,
+    optimal_timing,
+    time_with_jerk_limits,
+)
 from ..validate import is_number
 from .paper import paper_iterations
 from .records import (
@@ -235,7 +239,7 @@ def _setup(
             f"Robot.from_urdf(path)), got {type(robot).__name__} {robot!r:.60}"
         )
     cost = TimeCost() if cost is None else check_cost(cost)
-    _warn_unheld(robot)
+    _check_jerk_cost(robot, cost)
     method, options = _check_method(method, options, cost)
     for name, value, low, high in (
         ("max_iterations", max_iterations, 0, np.inf),
@@ -416,6 +420,9 @@ def _result(
     """The plan, its clearance certified when collisions are checked."""
     robot, collisions, goal, vias = setup.robot, setup.collisions, setup.goal, setup.vias
     method, t_start = setup.method, setup.t_start
+    jerk = None
+    if np.any(np.isfinite(robot.limits.jerk)):
+        timing, jerk, message = _under_jerk_limits(setup, timing, initial, message)
     return PlanResult(
         robot=robot,
         timing=timing,
@@ -431,7 +438,35 @@ def _result(
         goal=goal,
         via=tuple(vias),
         via_s=via_s,
+        jerk_timing=jerk,
     )
+
+
+def _under_jerk_limits(
+    setup: Segment, timing: TimingResult, initial: TimingResult, message: str
+) -> tuple[TimingResult, JerkTimingResult, str]:
+    """The path found and the first path timed under the jerk limits (stage 2 does not know
+    them yet: its path may be the worse one under them); the better, its stage-1 timing, the
+    message."""
+
+    def timed(path: Path) -> JerkTimingResult:
+        return time_with_jerk_limits(
+            setup.robot, path, setup.cost, grid=setup.grid, velocity_limits=setup.velocity_limits
+        )
+
+    found = timed(timing.trajectory.path)
+    note = f"J {timing.J:.6g} -> {found.J:.6g}, te {timing.duration:.4g} -> {found.duration:.4g} s"
+    if initial.trajectory.path is not timing.trajectory.path:
+        first = timed(initial.trajectory.path)
+        if first.J < found.J:
+            return (
+                initial,
+                first,
+                f"{message}; under the jerk limits the first path costs less (J "
+                f"{first.J:.6g} against {found.J:.6g} for the path found without them): it is "
+                f"returned, timed under them (te {first.duration:.4g} s)",
+            )
+    return timing, found, f"{message}; timed under the jerk limits: {note}"
 
 
 def _via_points(
@@ -547,12 +582,13 @@ def _certify(collisions: CollisionModel, path: Path) -> Clearance:
     return clear
 
 
-def _warn_unheld(robot: Robot) -> None:
-    """A :class:`~nearopt.LimitWarning` at :func:`plan`'s caller if the robot declares limits
-    the planner does not hold."""
-    unheld = robot.unheld_limits()
-    if unheld is not None:
-        warnings.warn(unheld, LimitWarning, stacklevel=4)
+def _check_jerk_cost(robot: Robot, cost: Cost) -> None:
+    """The jerk-limited timing minimises time or 1 + Σ w u² only."""
+    if np.any(np.isfinite(robot.limits.jerk)) and not isinstance(cost, TimeCost | TorqueCost):
+        raise ConfigurationError(
+            "with jerk limits the cost must be TimeCost or TorqueCost (1 + Σ w u²), got "
+            f"{type(cost).__name__}"
+        )
 
 
 def _check_method(

@@ -22,7 +22,7 @@ if TYPE_CHECKING:
     from ..path import Path
     from ..robot import Robot
     from ..robot.kinematics import ToolPose
-    from ..timing import TimingResult
+    from ..timing import JerkTimingResult, SmoothTrajectory, TimingResult
     from ..trajectory import Trajectory
     from ..verify import Waypoint
 
@@ -267,6 +267,10 @@ class PlanResult:
         The via-points passed through [rad or m], each (n,).
     via_s
         The path parameters where the path passes them.
+    jerk_timing
+        Where the robot has jerk limits: the returned path timed under them (C¹, θ̈ = 0 at
+        rest; :func:`~nearopt.timing.time_with_jerk_limits`). It is the motion, J and t_e of
+        the plan; ``timing`` is then stage 1's timing of the same path without them.
     """
 
     robot: Robot
@@ -283,6 +287,12 @@ class PlanResult:
     goal: ToolPose | None = None
     via: tuple[NDArray[np.float64], ...] = ()
     via_s: tuple[float, ...] = ()
+    jerk_timing: JerkTimingResult | None = None
+
+    @property
+    def final(self) -> TimingResult | JerkTimingResult:
+        """The returned timing: the jerk-limited one where there is one, else stage 1's."""
+        return self.timing if self.jerk_timing is None else self.jerk_timing
 
     @property
     def via_times(self) -> NDArray[np.float64]:
@@ -317,9 +327,9 @@ class PlanResult:
         return self.initial.J
 
     @property
-    def trajectory(self) -> Trajectory:
+    def trajectory(self) -> Trajectory | SmoothTrajectory:
         """The motion: θ(t), θ̇(t), θ̈(t), u(t) on [0, t_e], from rest at θ0 to rest at θe."""
-        return self.timing.trajectory
+        return self.final.trajectory
 
     @property
     def path(self) -> Path:
@@ -334,12 +344,12 @@ class PlanResult:
     @property
     def J(self) -> float:  # noqa: N802 - the paper's name
         """∫ f0 dt of the returned motion (adaptive Gauss-Kronrod over the exact timing)."""
-        return self.timing.J
+        return self.final.J
 
     @property
     def duration(self) -> float:
         """t_e [s]."""
-        return self.timing.duration
+        return self.final.duration
 
 
 @runtime_checkable

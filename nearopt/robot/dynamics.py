@@ -80,9 +80,9 @@ class JointLimits:
         The joints' names, for messages (a :class:`Robot`'s limits carry its joints').
     jerk
         Joint jerk limits |θ⃛_i| ≤ jerk_i [rad/s³ or m/s³] the robot's files declare (URDF 1.2
-        ``<limit jerk=…>``, ``joint_limits.yaml``); inf where none (the default). Read and shown,
-        **not yet held** by the planner: :func:`~nearopt.plan` warns
-        (:class:`~nearopt.LimitWarning`) when any is finite.
+        ``<limit jerk=…>``, ``joint_limits.yaml``) or :meth:`Robot.with_limits`; inf where none
+        (the default). Where any is finite, :func:`~nearopt.plan` times the path it finds under
+        them (:func:`~nearopt.timing.time_with_jerk_limits`).
 
     Every array is made read-only; they must have one shape (n,), no NaN, and each lower limit at
     most its upper one (a :class:`~nearopt.ConfigurationError` otherwise).
@@ -482,21 +482,6 @@ class Robot:
 
         return {j.get("name", "") for j in ET.fromstring(self.urdf_xml).iter("joint")}
 
-    def unheld_limits(self) -> str | None:
-        """What the robot declares that :func:`~nearopt.plan` does not hold, in one sentence
-        (its jerk limits), or None."""
-        jerk = self.limits.jerk
-        if not np.any(np.isfinite(jerk)):
-            return None
-        named = ", ".join(
-            f"{jn} {j:g}" for jn, j in zip(self.joint_names, jerk, strict=True) if np.isfinite(j)
-        )
-        return (
-            f"{self.name} declares jerk limits ({named} rad/s³ or m/s³) that this version of "
-            "nearopt does not hold: its motions keep the torque, speed, position and "
-            "acceleration limits, and θ̈ may jump at the timing's knots"
-        )
-
     def with_limits(
         self,
         *,
@@ -525,7 +510,7 @@ class Robot:
             removes them (the default where the URDF declares none).
         jerk
             Joint jerk limits |θ⃛_i| ≤ j_i [rad/s³ or m/s³], scalar or (n,); ``np.inf`` removes
-            them. Kept and shown, not yet held by the planner (:class:`~nearopt.LimitWarning`).
+            them (the default). :func:`~nearopt.plan` holds them for all t.
 
         Raises
         ------

@@ -55,7 +55,13 @@ from .conic import ConicSolution, is_solved, solve_conic
 from .discretisation import Discretisation, LinearRows, RowBlocks
 from .driver import TimingResult, optimal_timing
 from .interior import InteriorSolution, load_kernel, solve_interior
-from .jerk import JerkTiming, jerk_limited_timing
+from .jerk import (
+    JerkTiming,
+    JerkTimingResult,
+    SmoothTrajectory,
+    jerk_limited_timing,
+    time_with_jerk_limits,
+)
 from .joint import JointSolution, solve_joint
 from .problem import (
     MAX_GRID,
@@ -98,7 +104,10 @@ __all__ = [
     "InteriorSolution",
     "solve_interior",
     "JerkTiming",
+    "JerkTimingResult",
+    "SmoothTrajectory",
     "jerk_limited_timing",
+    "time_with_jerk_limits",
     "JointSolution",
     "solve_joint",
     "load_kernel",

@@ -37,7 +37,9 @@ the ends, solved by Clarabel.
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
+from functools import cached_property
 from math import comb
 
 import clarabel
@@ -51,7 +53,13 @@ from ..path import Path
 from ..robot import Robot
 from ..trajectory import InverseDynamics, Motion
 
-__all__ = ["JerkTiming", "SmoothTrajectory", "jerk_limited_timing"]
+__all__ = [
+    "JerkTiming",
+    "JerkTimingResult",
+    "SmoothTrajectory",
+    "jerk_limited_timing",
+    "time_with_jerk_limits",
+]
 
 MARGIN = 1e-6
 """Every bound is tightened by this much (relative), so that the convex solver's tolerance
@@ -352,6 +360,7 @@ class _Model:
         a_of = np.stack([-(1 - _NODES4), 1 - 2 * _NODES4, _NODES4], axis=1)  # Δ·a at the nodes
         d1, d2, d3 = (x[inner] for x in _derivatives(path, s[:-1], d, _NODES4))
         di = d[inner][:, None, None, None]
+        self.slope_peak = np.max(np.abs(d1), axis=1)  # max |θ'| on each inner segment, (K, n)
         # L_i at the nodes, (K, 5, n, 3) → its Bernstein coefficients
         values = (
             d3[..., None] * bern2_4[None, :, None, :]
@@ -650,8 +659,12 @@ class _Model:
         jerk limits allow at the segment's nodes (any B̄ > 0 gives a feasible restriction; a
         good one fewer iterations)."""
         peak = np.max(np.abs(self.l_coef.sum(axis=3)), axis=1)  # L of b ≡ 1: θ''', (K, n)
+        # a rest-to-rest ramp over the whole path, s ∝ t³ to its middle: a′ ≈ 4b/S², so
+        # |θ⃛| ≈ b^{3/2} |θ'| 4/S² ≤ j
+        ramp = self.s[-1] ** 2 / (4.0 * np.maximum(self.slope_peak, 1e-300))
         with np.errstate(divide="ignore"):
             jcap = np.min((self.jerk / np.maximum(peak, 1e-300)) ** (2 / 3), axis=1)
+            jcap = np.minimum(jcap, np.min((self.jerk * ramp) ** (2 / 3), axis=1))
         bbar = np.ones(self.d.size)
         bbar[self.inner] = np.clip(jcap, 1e-8, 1e6)
         return bbar
@@ -792,6 +805,11 @@ class SmoothTrajectory(Motion):
         x = np.where(k == last, 1.0 - rest**3, x)
         return np.minimum(self.s[k] + x * d, self.s[-1])
 
+    def time_at(self, s: ArrayLike) -> NDArray[np.float64]:
+        """t(s): when the motion reaches the path parameters s [s], shape (M,)."""
+        s = np.clip(np.atleast_1d(np.asarray(s, dtype=float)), 0.0, self.s[-1])
+        return self.timing.time_at(s)
+
     def states(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
         """θ(t), θ̇(t), θ̈(t) in one pass, each of shape (M, n)."""
         s = self.path_parameter(t)
@@ -816,3 +834,54 @@ class SmoothTrajectory(Motion):
             d3 = np.zeros((s.size, self.dof))
         inner = d3 * b[:, None] + 3 * self.path(s, 2) * a[:, None] + self.path(s, 1) * da[:, None]
         return np.sqrt(b)[:, None] * inner
+
+
+@dataclass(frozen=True)
+class JerkTimingResult:
+    """A path's jerk-limited timing as a plan returns it (the counterpart of
+    :class:`~nearopt.timing.TimingResult`).
+
+    Attributes
+    ----------
+    trajectory
+        The motion (:class:`SmoothTrajectory`).
+    cost
+        The running cost f0 that was minimised.
+    timing
+        The timing b(s).
+    wall_time
+        Time spent [s].
+    """
+
+    trajectory: SmoothTrajectory
+    cost: Cost
+    timing: JerkTiming
+    wall_time: float
+
+    @cached_property
+    def J(self) -> float:  # noqa: N802 - the paper's name
+        """∫ f0 dt of the motion, by adaptive Gauss–Kronrod quadrature."""
+        return self.trajectory.integrate(self.cost)
+
+    @property
+    def duration(self) -> float:
+        """t_e [s]."""
+        return self.trajectory.duration
+
+
+def time_with_jerk_limits(
+    robot: Robot,
+    path: Path,
+    cost: Cost,
+    *,
+    grid: int = 200,
+    velocity_limits: bool = True,
+) -> JerkTimingResult:
+    """The robot's jerk limits (:attr:`~nearopt.robot.JointLimits.jerk`) held on ``path``: its
+    :func:`jerk_limited_timing` for ``cost`` under the robot's other limits (its speed limits
+    only with ``velocity_limits``), as a motion."""
+    start = time.perf_counter()
+    limited = robot if velocity_limits else robot.with_limits(velocity=np.inf)
+    timing = jerk_limited_timing(limited, path, robot.limits.jerk, cost, grid=grid)
+    motion = SmoothTrajectory(path, timing, robot.inverse_dynamics_batch)
+    return JerkTimingResult(motion, cost, timing, time.perf_counter() - start)
