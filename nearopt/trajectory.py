@@ -325,6 +325,18 @@ class ChainedTrajectory(Motion):
                 array[mask] = value
         return out
 
+    def jerk(self, t: ArrayLike) -> NDArray[np.float64]:
+        """θ⃛(t) of the parts that have one (jerk-limited timings), inf in the others (θ̈ jumps
+        at their knots), shape (M, n)."""
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        k = self.part_at(t)
+        out = np.full((t.size, self.dof), np.inf)
+        for index in np.unique(k):
+            part, mask = self.parts[index], k == index
+            if hasattr(part, "jerk"):
+                out[mask] = part.jerk(t[mask] - self.starts[index])
+        return out
+
 
 # Gauss-Kronrod 7/15 on [-1, 1] (QUADPACK's qk15): Kronrod nodes and weights, and the weights of
 # the 7-point Gauss rule on its nodes (every second Kronrod node)

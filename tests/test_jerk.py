@@ -204,3 +204,22 @@ def test_a_plan_with_jerk_limits_returns_the_better_path_under_them() -> None:
     report = nearopt.verify_plan(result)
     assert report.passed, report
     assert "joint jerk limits" in {c.name for c in report.checks}
+
+
+def test_a_task_with_jerk_limits() -> None:
+    """Every segment of a task is timed under the jerk limits; the whole motion (a chain of
+    them) passes the verification, the jerk included, and stops with θ̈ = 0 at its target."""
+    robot = nearopt.Robot.from_name("two_link").with_limits(jerk=200.0)
+    targets = [np.array([0.5, -0.5]), np.array([-0.3, 0.4])]
+    task = nearopt.plan_task(
+        robot,
+        np.array([0.0, 0.0]),
+        targets,
+        settings=nearopt.PlanSettings(grid=60, max_iterations=2),
+    )
+    assert all(isinstance(part.trajectory, SmoothTrajectory) for part in task.segments)
+    report = nearopt.verify_plan(task)
+    assert report.passed, report
+    assert "joint jerk limits" in {c.name for c in report.checks}
+    stop = task.segments[0].duration
+    assert np.max(np.abs(task.trajectory([stop - 1e-9, stop + 1e-9], 2))) <= 1e-2
