@@ -189,6 +189,11 @@ def test_damped_arms_and_an_energy_cost(name: str) -> None:
         u = trajectory.torque(timing.time_at(s))
         assert np.all(u <= robot.limits.effort_upper * (1 + 1e-9))
         assert np.all(u >= robot.limits.effort_lower * (1 + 1e-9))
+        # between them too, to verify's tolerance (the rows refined where 32 points per
+        # segment found the torque beyond a limit)
+        u = trajectory.torque(np.linspace(0.0, trajectory.duration, 40001))
+        assert np.all(u <= robot.limits.effort_upper * (1 + 1e-6))
+        assert np.all(u >= robot.limits.effort_lower * (1 + 1e-6))
 
 
 def test_a_plan_with_jerk_limits_returns_the_better_path_under_them() -> None:

@@ -26,8 +26,10 @@ the hull of its Bernstein coefficients):
   iterate's B̄_k — a convex restriction (the convex–concave procedure of Debrouwere et al.,
   2013). Its solution is feasible for the true constraint and the previous iterate is feasible
   for it, so every iterate holds the limits and the duration never increases;
-- torque: at the knots and the segments' midpoints only (stage 1's rows between the samples are
-  not built for this timing yet).
+- torque: at the knots and the segments' midpoints, and wherever a check at 32 points inside
+  every segment finds it beyond a limit (those points become rows and the timing is solved
+  again, :data:`REFINEMENTS` times at most; stage 1's bounds between the samples are not built
+  for this timing yet).
 
 The end segments' quantities are β^p times known functions of σ (speed and acceleration p = 1,
 jerk p = 3/2): each gives a bound on β. The duration Σ_k Δ_k ∫ dσ/√b is 4-point Gauss–Legendre
@@ -64,6 +66,9 @@ __all__ = [
 MARGIN = 1e-6
 """Every bound is tightened by this much (relative), so that the convex solver's tolerance
 leaves no excess."""
+REFINEMENTS = 3
+"""How often the torque rows are refined at most: where the torque checked at 32 points inside
+every segment is beyond a limit, those points become rows too and the timing is solved again."""
 
 
 def _bernstein(degree: int, sigma: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -100,8 +105,9 @@ class JerkTiming:
     m
         The Bézier middle coefficients of the segments (unused, NaN, on the two end segments).
     history
-        J after each convex program, by the model's quadrature (time-optimal: the duration [s];
-        non-increasing, up to the convex solver's tolerance); the timing is the best of them.
+        J after each convex program of the last refinement of the torque rows, by the model's
+        quadrature (time-optimal: the duration [s]; non-increasing, up to the convex solver's
+        tolerance); the timing is the best of them.
     """
 
     s: NDArray[np.float64]
@@ -221,21 +227,33 @@ def jerk_limited_timing(
             "the jerk-limited timing minimises time (TimeCost) or 1 + Σ w u² (TorqueCost), "
             f"got {type(cost).__name__}"
         )
-    model = _Model(robot, path, _grid(path, grid), jerk, acc, torque, weights)
+    s = _grid(path, grid)
+    model = _Model(robot, path, s, jerk, acc, torque, weights)
     bbar = model.first_linearisation()
-    history: list[float] = []
-    best: tuple[float, NDArray[np.float64]] | None = None
     x: NDArray[np.float64] | None = None
-    for _ in range(max_iterations):
-        x, value = model.solve(bbar, x)
-        history.append(value)
-        if best is None or value < best[0]:  # (equal up to the solver's 1e-8)
-            best = (value, x)
-        if len(history) > 1 and history[-2] - value <= tolerance * abs(value):
+    extra = (np.zeros(0, dtype=np.int64), np.zeros(0))
+    for _ in range(1 + REFINEMENTS):
+        history: list[float] = []
+        best: tuple[float, NDArray[np.float64]] | None = None
+        for _ in range(max_iterations):
+            x, value = model.solve(bbar, x)
+            history.append(value)
+            if best is None or value < best[0]:  # (equal up to the solver's 1e-8)
+                best = (value, x)
+            if len(history) > 1 and history[-2] - value <= tolerance * abs(value):
+                break
+            bbar = np.maximum(x[model.iB], 1e-300)
+        assert best is not None
+        x = best[1]
+        if model.tq is None:
             break
-        bbar = np.maximum(x[model.iB], 1e-300)
-    assert best is not None
-    return model.timing(best[1], tuple(history))
+        more = model.torque_excess(robot, path, x)
+        if not more[0].size:
+            break
+        extra = (np.concatenate([extra[0], more[0]]), np.concatenate([extra[1], more[1]]))
+        model = _Model(robot, path, s, jerk, acc, torque, weights, extra)
+        x = x[: model.iB[-1] + 1]  # b, m and B keep their places: the roots read them
+    return model.timing(x, tuple(history))
 
 
 def _grid(path: Path, segments: int) -> NDArray[np.float64]:
@@ -338,8 +356,10 @@ class _Model:
         acc: NDArray[np.float64],
         torque: bool,
         weights: NDArray[np.float64] | None = None,
+        extra: tuple[NDArray, NDArray] | None = None,
     ) -> None:
         self.s, self.d = s, np.diff(s)
+        self.extra = extra
         self.jerk = jerk
         big_n = self.d.size
         if big_n < 4:
@@ -542,7 +562,28 @@ class _Model:
         seg = np.concatenate([np.repeat(np.arange(big_n), 2), [big_n - 1]])
         sig = np.concatenate([np.tile([0.0, 0.5], big_n), [1.0]])
         keep = ~(((seg == 0) & (sig == 0.0)) | ((seg == big_n - 1) & (sig == 1.0)))
-        return self._points(robot, path, seg[keep], sig[keep])
+        seg, sig = seg[keep], sig[keep]
+        if self.extra is not None:  # where a denser check found the torque beyond a limit
+            seg, sig = np.concatenate([seg, self.extra[0]]), np.concatenate([sig, self.extra[1]])
+        return self._points(robot, path, seg, sig)
+
+    def torque_excess(
+        self, robot: Robot, path: Path, x: NDArray[np.float64], per_segment: int = 32
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
+        """The points among ``per_segment`` inside every segment where the solution's torque
+        is beyond a limit (more than half the margin into it): segments and σ."""
+        big_n = self.d.size
+        sig = np.linspace(0.0, 1.0, per_segment + 2)[1:-1]
+        seg = np.repeat(np.arange(big_n), sig.size)
+        sig = np.tile(sig, big_n)
+        pts = self._points(robot, path, seg, sig)
+        columns = x[pts.cols]  # (P, 3)
+        root = np.maximum(np.einsum("pc,pc->p", pts.root_w, columns), 0.0)
+        u = np.einsum("pnc,pc->pn", pts.affine(), columns) + pts.g
+        u += pts.delta * (pts.kappa * np.sqrt(root))[:, None]
+        lim, keep = self.limits, 1.0 - 0.5 * MARGIN
+        over = np.any((u > keep * lim.effort_upper) | (u < keep * lim.effort_lower), axis=1)
+        return seg[over], sig[over]
 
     def _torque_rows(self, rows: _Rows, bbar: NDArray[np.float64]) -> None:
         """u within the effort limits at the torque points: A x + δ√b ≤ U − g and the lower
