@@ -170,3 +170,25 @@ def test_history_plot_and_files(paper_plan: nearopt.PlanResult, tmp_path: Path) 
         "history.png",
     ]
     assert all(p.stat().st_size > 10_000 and p.read_bytes()[:4] == b"\x89PNG" for p in written)
+
+
+def test_a_jerk_limited_plan_gets_its_jerk_figure() -> None:
+    """With jerk limits the figures include jerks.png: θ⃛_i(t) of the motion against ±j_i,
+    reaching the limit and not beyond it."""
+    from nearopt.viz.figures import plot_jerks, render_figures
+
+    robot = load("two_link").with_limits(jerk=300.0)
+    result = nearopt.plan(
+        robot, np.array([0.5, -0.5]), np.array([-0.4, 0.6]), max_iterations=1, grid=60
+    )
+    fig = plot_jerks(robot, result.trajectory, rate=2000.0)
+    peaks = []
+    for i, ax in enumerate(fig.axes):
+        curve, *limits = ax.get_lines()
+        t, jerk = curve.get_xydata().T
+        np.testing.assert_allclose(jerk, result.trajectory.jerk(t)[:, i], atol=1e-9)
+        assert sorted(float(line.get_ydata()[0]) for line in limits) == [-300.0, 300.0]
+        assert ax.get_ylabel().endswith("[rad/s³]")
+        peaks.append(np.max(np.abs(jerk)) / 300.0)
+    assert 0.9 < max(peaks) <= 1.0
+    assert {"jerks.png", "accelerations.png"} <= set(render_figures(result))

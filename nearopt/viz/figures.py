@@ -1,7 +1,8 @@
 """The paper's figures for a plan (matplotlib, imported only when a figure is drawn).
 
 * :func:`plot_torques` — u_i(t) against the actuator limits (Figs. 6-8);
-* :func:`plot_speeds`, :func:`plot_accelerations` — θ̇_i(t), θ̈_i(t) against their limits;
+* :func:`plot_speeds`, :func:`plot_accelerations`, :func:`plot_jerks` — θ̇_i(t), θ̈_i(t), θ⃛_i(t)
+  against their limits;
 * :func:`plot_workspace` — the tip's path and link poses of the initial and final paths in the
   workspace (Figs. 3-5): in the arm's plane for a planar arm, in 3-D otherwise;
 * :func:`plot_history` — J over the iterations (Table 2);
@@ -30,12 +31,13 @@ if TYPE_CHECKING:
     from ..collision import Scene
     from ..robot import Robot
     from ..robot.kinematics import ToolPose
-    from ..trajectory import ChainedTrajectory, Trajectory
+    from ..trajectory import ChainedTrajectory, Motion, Trajectory
 
 __all__ = [
     "plot_torques",
     "plot_speeds",
     "plot_accelerations",
+    "plot_jerks",
     "prismatic",
     "plot_workspace",
     "plot_history",
@@ -184,6 +186,23 @@ def plot_accelerations(robot: Robot, trajectory: Trajectory, rate: float = 2000.
         (-a, a),
         ("θ̈", "rad/s²", "m/s²"),
         f"{robot.name}: joint accelerations and limits (te = {trajectory.duration:.4f} s)",
+        _stops(trajectory),
+    )
+
+
+def plot_jerks(robot: Robot, trajectory: Motion, rate: float = 2000.0) -> Figure:
+    """θ⃛_i(t) of a jerk-limited motion (one with a ``jerk(t)``: a
+    :class:`~nearopt.timing.SmoothTrajectory` or a task of them), one panel per joint, with the
+    jerk limits ±j_i."""
+    t = np.linspace(0.0, trajectory.duration, max(2, int(trajectory.duration * rate) + 1))
+    j = robot.limits.jerk
+    return _joint_panels(
+        robot,
+        t,
+        trajectory.jerk(t),  # type: ignore[attr-defined]
+        (-j, j),
+        ("θ⃛", "rad/s³", "m/s³"),
+        f"{robot.name}: joint jerks and limits (te = {trajectory.duration:.4f} s)",
         _stops(trajectory),
     )
 
@@ -377,8 +396,9 @@ def plot_history(
 
 
 def render_figures(result: Plan, reference: dict[int, float] | None = None) -> dict[str, bytes]:
-    """torques.png, speeds.png (accelerations.png if the robot has acceleration limits),
-    workspace.png and history.png of a plan, as PNG bytes by file name."""
+    """torques.png, speeds.png (accelerations.png if the robot has acceleration or jerk limits,
+    jerks.png if it has jerk limits), workspace.png and history.png of a plan, as PNG bytes by
+    file name."""
     check_plan(result)
     plt = _pyplot()
     robot, traj = result.robot, result.trajectory
@@ -386,8 +406,10 @@ def render_figures(result: Plan, reference: dict[int, float] | None = None) -> d
         "torques.png": plot_torques(robot, traj),
         "speeds.png": plot_speeds(robot, traj),
     }
-    if np.any(np.isfinite(robot.limits.acceleration)):
+    if np.any(np.isfinite(robot.limits.acceleration) | np.isfinite(robot.limits.jerk)):
         figures["accelerations.png"] = plot_accelerations(robot, traj)
+    if np.any(np.isfinite(robot.limits.jerk)) and hasattr(traj, "jerk"):
+        figures["jerks.png"] = plot_jerks(robot, traj)
     figures["workspace.png"] = plot_workspace(
         robot,
         {"initial": result.initial_trajectory, "final": traj},
