@@ -253,20 +253,61 @@ def jerk_limited_timing(
         extra = (np.concatenate([extra[0], more[0]]), np.concatenate([extra[1], more[1]]))
         model = _Model(robot, path, s, jerk, acc, torque, weights, extra)
         x = x[: model.iB[-1] + 1]  # b, m and B keep their places: the roots read them
-    return model.timing(x, tuple(history))
+    return _slowed_down(model.timing(x, tuple(history)), robot, path, acc, jerk)
+
+
+def _slowed_down(
+    timing: JerkTiming, robot: Robot, path: Path, acc: NDArray, jerk: NDArray
+) -> JerkTiming:
+    """The timing scaled down uniformly (b → κ b: θ̇ by √κ, θ̈ by κ, θ⃛ by κ^{3/2}) where a check
+    at 32 points inside every segment finds the speed, acceleration or jerk beyond a limit:
+    what the convex solver's tolerance, amplified on short segments, left. Each ratio to its
+    limit then at most 1 − 1e-9."""
+    x = np.concatenate([[1e-9], np.linspace(0.0, 1.0, 34)[1:-1], [1.0 - 1e-9]])  # both ends too
+    s = (timing.s[:-1, None] + x[None, :] * np.diff(timing.s)[:, None]).ravel()
+    b, a, da = timing.evaluate(s)
+    q1, q2 = np.asarray(path(s, 1)), np.asarray(path(s, 2))
+    try:
+        q3 = np.asarray(path(s, 3))  # type: ignore[arg-type]
+    except ValueError:
+        q3 = np.zeros_like(q1)
+    root = np.sqrt(b)[:, None]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        speed = np.nanmax(np.abs(q1 * root) / robot.limits.velocity)
+        accel = np.nanmax(np.abs(q2 * b[:, None] + q1 * a[:, None]) / acc)
+        third = root * (q3 * b[:, None] + 3 * q2 * a[:, None] + q1 * da[:, None])
+        jerks = np.nanmax(np.abs(third) / jerk)
+    keep = 1.0 - 1e-9
+    kappa = min(1.0, keep / speed**2, keep / accel, (keep / jerks) ** (2 / 3))
+    if kappa >= 1.0:
+        return timing
+    return JerkTiming(timing.s, kappa * timing.b, kappa * timing.m, timing.history)
+
+
+END_LEVELS = 5
+"""The first and last segments are halved this many times (knots at Δ/2, Δ/4, … from each end):
+the s ∝ t³ start and stop take one segment, and a short one costs little time where the jerk
+limit does not bind there."""
 
 
 def _grid(path: Path, segments: int) -> NDArray[np.float64]:
-    """Uniform knots with the path's breakpoints added (unless one is closer to a knot than
-    1e-3 of a segment: then that knot moves onto it)."""
+    """Uniform knots with the path's breakpoints on knots (the nearest inner knot moves onto a
+    breakpoint within 0.3 of a segment of it, else the breakpoint is added: no segment shorter
+    than 0.3 of the others but near the ends), and the end segments halved
+    :data:`END_LEVELS` times."""
+    step = path.s_end / segments
     s = np.linspace(0.0, path.s_end, segments + 1)
+    moved = np.zeros(s.size, dtype=bool)
+    extra = []
     for x in np.asarray(path.breakpoints, dtype=float):
         k = int(np.argmin(np.abs(s - x)))
-        if abs(s[k] - x) <= 1e-3 * path.s_end / segments:
-            s[k] = x
+        if 0 < k < segments and not moved[k] and abs(s[k] - x) <= 0.3 * step:
+            s[k], moved[k] = x, True
         else:
-            s = np.sort(np.append(s, x))
-    return s
+            extra.append(x)
+    s = np.unique(np.concatenate([s, extra]))
+    halves = 0.5 ** np.arange(1, END_LEVELS + 1)
+    return np.unique(np.concatenate([s, s[1] * halves, s[-1] - (s[-1] - s[-2]) * halves]))
 
 
 def _derivatives(path: Path, s0: NDArray, d: NDArray, nodes: NDArray) -> tuple[NDArray, ...]:
@@ -762,12 +803,17 @@ class _Model:
             offset = 0.0
         if self.cp is not None:
             offset += self.cost_constant  # Σ ω 2 Σ w δ κ g: no variable in it
-        linear = sp.vstack([a_eq, a_fix, a_it]).tocsr()
+        # the variables in units where b is about 1 (the solver's tolerances have an absolute
+        # floor: with b ~ 1e-5 they would leave ~1 % of a jerk row), and each linear row's
+        # largest coefficient 1
+        columns = self.units(bbar)
+        linear = sp.vstack([a_eq, a_fix, a_it]).tocsr() @ sp.diags(columns)
         h_linear = np.concatenate([h_eq, h_fix, h_it])
         scale = 1.0 / np.maximum(abs(linear).max(axis=1).toarray().ravel(), 1e-300)
-        linear = sp.diags(scale) @ linear  # each row's largest coefficient 1
-        a = sp.vstack([linear, a_cone]).tocsc()
+        linear = sp.diags(scale) @ linear
+        a = sp.vstack([linear, a_cone @ sp.diags(columns)]).tocsc()
         h = np.concatenate([h_linear * scale, h_cone])
+        objective = objective * columns
         cones = [
             clarabel.ZeroConeT(a_eq.shape[0]),
             clarabel.NonnegativeConeT(a_fix.shape[0] + a_it.shape[0]),
@@ -780,7 +826,19 @@ class _Model:
         ).solve()
         if str(solution.status) not in ("Solved", "AlmostSolved"):
             raise SolverError(f"the jerk-limited timing's convex program: {solution.status}")
-        return np.asarray(solution.x), float(solution.obj_val) + offset
+        return columns * np.asarray(solution.x), float(solution.obj_val) + offset
+
+    def units(self, bbar: NDArray[np.float64]) -> NDArray[np.float64]:
+        """Each variable's unit: S = the largest B̄ for b, m and B, √S for the w ≤ √b, 1/√S for
+        the τ ≥ 1/√b; 1 for the rest."""
+        unit = float(np.max(bbar[self.inner]))
+        columns = np.ones(self.nv)
+        columns[np.concatenate([self.ib, self.im, self.iB])] = unit
+        columns[self.iw.ravel()] = np.sqrt(unit)
+        columns[self.it.ravel()] = 1.0 / np.sqrt(unit)
+        if self.tq is not None and self.damped:
+            columns[self.iwt] = np.sqrt(unit)
+        return columns
 
     def timing(self, x: NDArray[np.float64], history: tuple[float, ...]) -> JerkTiming:
         b = np.maximum(x[self.ib], 0.0)
