@@ -228,3 +228,36 @@ def test_a_task_with_jerk_limits() -> None:
     assert "joint jerk limits" in {c.name for c in report.checks}
     stop = task.segments[0].duration
     assert np.max(np.abs(task.trajectory([stop - 1e-9, stop + 1e-9], 2))) <= 1e-2
+
+
+@pytest.mark.parametrize(
+    ("arguments", "message"),
+    [
+        ({"jerk": "abc"}, "jerk limit is not numeric"),
+        ({"jerk": [1.0, 2.0, 3.0]}, "jerk limit must have 2 values"),
+        ({"jerk": 50.0, "grid": 2.5}, "grid must be an integer ≥ 4"),
+        ({"jerk": 50.0, "max_iterations": 0}, "max_iterations must be an integer ≥ 1"),
+        ({"jerk": 50.0, "acceleration": 0.0}, "acceleration limit of joint 'joint1' is 0"),
+        ({"jerk": 50.0, "acceleration": np.nan}, "acceleration limit of joint 'joint1' is nan"),
+    ],
+)
+def test_bad_arguments_of_the_jerk_limited_timing(arguments: dict, message: str) -> None:
+    robot = load("two_link")
+    path = nearopt.StraightPath(np.zeros(2), np.array([1.0, 0.5]))
+    jerk = arguments.pop("jerk")
+    with pytest.raises(nearopt.ConfigurationError, match=message):
+        jerk_limited_timing(robot, path, jerk, **arguments)
+
+
+@pytest.mark.parametrize("jerk", [0.05, 1.0, 1e6])
+def test_small_and_huge_jerk_limits(jerk: float) -> None:
+    """A small limit (b ~ 1e-5: the solver works in units where b ~ 1) holds at 50 kHz; a
+    limit that never binds costs little against no limit at all (the end segments are short)."""
+    robot = load("two_link")
+    path = nearopt.StraightPath(np.zeros(2), np.array([1.0, 0.5]))
+    timing = jerk_limited_timing(robot, path, jerk, grid=100)
+    motion = SmoothTrajectory(path, timing, robot.inverse_dynamics_batch)
+    t = np.linspace(0.0, motion.duration, int(50_000 * min(motion.duration, 4.0)))
+    assert np.max(np.abs(motion.jerk(t))) <= jerk
+    if jerk == 1e6:
+        assert timing.duration <= 1.03 * optimal_timing(robot, path, grid=100).duration

@@ -159,3 +159,41 @@ def test_a_motion_with_jumps_fails_a_jerk_limited_check() -> None:
     report = nearopt.verify(result.trajectory, robot.with_limits(jerk=100.0))
     failed = {c.name for c in report.checks if not c.passed}
     assert "joint jerk limits" in failed
+
+
+@pytest.mark.parametrize(
+    ("text", "message"),
+    [
+        ("joint_limits:\n  panda_joint1:\n    has_jerk_limit: true\n    max_jerk: 5",
+         "unknown key 'has_jerk_limit'"),
+        ("joint_limits:\n  panda_joint1:\n    has_velocity_limits: true\n    max_velocity: -2",
+         r"max_velocity is -2: a limit must be > 0"),
+    ],
+)  # fmt: skip
+def test_a_misspelt_key_or_a_negative_limit_is_refused(
+    tmp_path: Path, text: str, message: str
+) -> None:
+    path = tmp_path / "joint_limits.yaml"
+    path.write_text(text)
+    with pytest.raises(nearopt.ConfigurationError, match=message):
+        nearopt.Robot.from_name("panda").with_joint_limits(path)
+
+
+def test_yaml_numbers_without_a_dot_and_binary_files(tmp_path: Path) -> None:
+    """PyYAML reads 1e3 as text (YAML 1.1); MoveIt reads a number: so does nearopt. A file that
+    is not text is refused in one line."""
+    path = tmp_path / "joint_limits.yaml"
+    path.write_text(
+        "joint_limits:\n  panda_joint1:\n    has_jerk_limits: true\n    max_jerk: 1e3\n"
+    )
+    assert nearopt.Robot.from_name("panda").with_joint_limits(path).limits.jerk[0] == 1000.0
+    path.write_bytes(b"\xff\xfe\x00binary")
+    with pytest.raises(nearopt.ConfigurationError, match="not a text file"):
+        nearopt.Robot.from_name("panda").with_joint_limits(path)
+
+
+def test_an_empty_urdf_rate_limit_names_the_joint(tmp_path: Path) -> None:
+    limit = '<limit effort="5" velocity="2" lower="-3" upper="3" jerk=""/>'
+    path = write_urdf(tmp_path, limits=(RATES[1], limit))
+    with pytest.raises(nearopt.URDFError, match="j2.*jerk"):
+        nearopt.Robot.from_urdf(path)

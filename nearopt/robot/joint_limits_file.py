@@ -37,6 +37,14 @@ from ..errors import ConfigurationError
 __all__ = ["FileLimits", "read_joint_limits"]
 
 _KINDS = ("velocity", "acceleration", "deceleration", "jerk", "effort")
+_KEYS = {
+    *(f"has_{kind}_limits" for kind in _KINDS),
+    *(f"max_{kind}" for kind in _KINDS),
+    "has_position_limits",
+    "min_position",
+    "max_position",
+    "has_soft_limits",
+}
 
 
 @dataclass(frozen=True)
@@ -78,6 +86,8 @@ def read_joint_limits(path: str | Path) -> dict[str, FileLimits]:
         raise ConfigurationError(
             f"cannot read the joint limits file {path}: {exc.strerror}"
         ) from None
+    except UnicodeDecodeError:
+        raise ConfigurationError(f"{path} is not a text file (YAML)") from None
     except yaml.YAMLError as exc:
         raise ConfigurationError(f"{path} is not YAML: {exc}") from None
     if not isinstance(data, dict) or not isinstance(data.get("joint_limits"), dict):
@@ -97,11 +107,18 @@ def _joint(path: Path, joint: str, entry: object) -> FileLimits:
     if not isinstance(entry, dict):
         raise ConfigurationError(f"{where}: expected a mapping of its limits, got {entry!r:.60}")
     values: dict[str, object] = {}
+    for key in entry:  # a misspelt key would leave its limit out without a word
+        if str(key).startswith(("has_", "max_", "min_")) and key not in _KEYS:
+            raise ConfigurationError(
+                f"{where}: unknown key {key!r} (known: {', '.join(sorted(_KEYS))})"
+            )
     for kind in _KINDS:
         if _has(where, entry, f"has_{kind}_limits"):
-            value = abs(_number(where, entry, f"max_{kind}"))  # a deceleration may be negative
-            if value == 0.0:
-                raise ConfigurationError(f"{where}: max_{kind} is 0: a limit must be > 0")
+            value = _number(where, entry, f"max_{kind}")
+            if kind == "deceleration":  # ros2_control writes it negative: its magnitude
+                value = abs(value)
+            if not value > 0.0:
+                raise ConfigurationError(f"{where}: max_{kind} is {value:g}: a limit must be > 0")
             values[kind] = value
     if _has(where, entry, "has_position_limits"):
         low, high = _number(where, entry, "min_position"), _number(where, entry, "max_position")
@@ -122,6 +139,11 @@ def _has(where: str, entry: dict, key: str) -> bool:
 
 def _number(where: str, entry: dict, key: str) -> float:
     value = entry.get(key)
+    if isinstance(value, str):  # YAML 1.1 reads 1e3 (no dot) as text; MoveIt as a number
+        try:
+            value = float(value)
+        except ValueError:
+            pass
     if isinstance(value, bool) or not isinstance(value, int | float) or not math.isfinite(value):
         said = "is missing" if value is None else f"must be a finite number, got {value!r:.40}"
         raise ConfigurationError(f"{where}: {key} {said}")

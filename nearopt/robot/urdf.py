@@ -392,13 +392,14 @@ def _rate_limits(name: str, joint: ET.Element, path: Path) -> RateLimits:
         text = None if limit is None else limit.attrib.pop(attr, None)
         if text is None:
             continue
-        value = float(text)
-        if not value > 0.0:
+        numbers = _floats(text, path, f"<limit {attr}> of joint {name!r}")
+        if len(numbers) != 1 or not numbers[0] > 0.0:
             raise _error(
                 path,
-                f"joint {name!r} has a {attr} limit {text}: it must be > 0 (leave the attribute "
-                "out for none)",
+                f"joint {name!r} has the {attr} limit {text!r}: it must be one number > 0 (leave "
+                "the attribute out for none)",
             )
+        value = numbers[0]
         values[attr] = value
     return RateLimits(**values)
 

@@ -208,16 +208,20 @@ def jerk_limited_timing(
     Raises
     ------
     ConfigurationError
-        Jerk limits that are not positive, or another cost.
+        Jerk or acceleration limits that are not positive numbers (one, or one per joint), a
+        grid below 4 segments, ``max_iterations`` below 1, or another cost.
     SolverError
         If a convex program fails.
     """
     n = robot.n
-    jerk = np.broadcast_to(np.asarray(jerk, dtype=float), (n,)).copy()
-    if np.any(np.isnan(jerk)) or np.any(jerk <= 0):
-        raise ConfigurationError(f"jerk limits must be > 0 [rad/s³], got {jerk.tolist()}")
-    acc = robot.limits.acceleration if acceleration is None else acceleration
-    acc = np.broadcast_to(np.asarray(acc, dtype=float), (n,)).copy()
+    # the robot's checks of limits: one number or one per joint, > 0, inf for none
+    checked = robot.with_limits(
+        jerk=jerk, acceleration=robot.limits.acceleration if acceleration is None else acceleration
+    )
+    jerk, acc = checked.limits.jerk, checked.limits.acceleration
+    for name, value, low in (("grid", grid, 4), ("max_iterations", max_iterations, 1)):
+        if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
+            raise ConfigurationError(f"{name} must be an integer ≥ {low}, got {value!r}")
     if cost is None or isinstance(cost, TimeCost):
         weights = None
     elif isinstance(cost, TorqueCost):
@@ -278,7 +282,8 @@ def _slowed_down(
         third = root * (q3 * b[:, None] + 3 * q2 * a[:, None] + q1 * da[:, None])
         jerks = np.nanmax(np.abs(third) / jerk)
     keep = 1.0 - 1e-9
-    kappa = min(1.0, keep / speed**2, keep / accel, (keep / jerks) ** (2 / 3))
+    ratios = np.array([speed**2, accel, jerks ** (2 / 3)])  # each ∝ κ: what κ = 1 leaves
+    kappa = min(1.0, keep / max(float(np.max(ratios)), 1e-300))
     if kappa >= 1.0:
         return timing
     return JerkTiming(timing.s, kappa * timing.b, kappa * timing.m, timing.history)

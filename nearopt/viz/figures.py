@@ -201,7 +201,7 @@ def plot_jerks(robot: Robot, trajectory: Motion, rate: float = 2000.0) -> Figure
         t,
         trajectory.jerk(t),  # type: ignore[attr-defined]
         (-j, j),
-        ("θ⃛", "rad/s³", "m/s³"),
+        ("d³θ/dt³", "rad/s³", "m/s³"),
         f"{robot.name}: joint jerks and limits (te = {trajectory.duration:.4f} s)",
         _stops(trajectory),
     )
