@@ -926,7 +926,10 @@ class SmoothTrajectory(Motion):
         )
 
     def jerk(self, t: ArrayLike) -> NDArray[np.float64]:
-        """θ⃛(t) = √b (θ‴ b + 3θ″ a + θ′ a′) [rad/s³ or m/s³], shape (M, n)."""
+        """θ⃛(t) = √b (θ‴ b + 3θ″ a + θ′ a′) [rad/s³ or m/s³], shape (M, n); 0 before and after
+        the motion (at rest)."""
+        t = np.atleast_1d(np.asarray(t, dtype=float)).ravel()
+        outside = (t < 0.0) | (t > self.duration)
         s = self.path_parameter(t)
         # at rest √b → 0 and a′ → ∞ with a finite product: its limit from just inside
         ends = 1e-9 * np.diff(self.s)[[0, -1]]
@@ -937,7 +940,7 @@ class SmoothTrajectory(Motion):
         except ValueError:
             d3 = np.zeros((s.size, self.dof))
         inner = d3 * b[:, None] + 3 * self.path(s, 2) * a[:, None] + self.path(s, 1) * da[:, None]
-        return np.sqrt(b)[:, None] * inner
+        return np.where(outside[:, None], 0.0, np.sqrt(b)[:, None] * inner)
 
 
 @dataclass(frozen=True)
