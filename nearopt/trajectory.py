@@ -14,6 +14,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import cached_property
 from typing import TYPE_CHECKING, Literal
 
 import numpy as np
@@ -26,7 +27,7 @@ if TYPE_CHECKING:
 
     from .path import Path
 
-__all__ = ["Motion", "Trajectory", "ChainedTrajectory", "Samples", "segment_times"]
+__all__ = ["Motion", "MotionCost", "Trajectory", "ChainedTrajectory", "Samples", "segment_times"]
 
 InverseDynamics = Callable[
     ["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"], "NDArray[np.float64]"
@@ -180,6 +181,24 @@ class Motion:
             mid = 0.5 * (lo[bad] + hi[bad])
             lo, hi = np.concatenate([lo[bad], mid]), np.concatenate([mid, hi[bad]])
         return total
+
+
+class MotionCost:
+    """J and t_e of a timing's result (a record with a ``trajectory`` and the ``cost`` it
+    minimised): ∫ f0 dt along the motion and its duration."""
+
+    trajectory: Motion
+    cost: Callable[..., NDArray[np.float64]]
+
+    @cached_property
+    def J(self) -> float:  # noqa: N802 - the paper's name
+        """∫ f0 dt of the motion [s·(unit of f0)], by adaptive Gauss-Kronrod quadrature."""
+        return self.trajectory.integrate(self.cost)
+
+    @property
+    def duration(self) -> float:
+        """t_e [s]."""
+        return self.trajectory.duration
 
 
 class Trajectory(Motion):

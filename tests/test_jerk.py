@@ -5,6 +5,9 @@ of copp-py's TOPP3-LP (which holds the jerk at its stations only) on the same gr
 
 from __future__ import annotations
 
+import sys
+from pathlib import Path
+
 import numpy as np
 import pytest
 from conftest import load
@@ -108,32 +111,17 @@ def test_a_lower_jerk_limit_takes_longer_and_no_jerk_limit_is_shorter_still() ->
 
 
 def test_within_one_percent_of_copp_topp3() -> None:
-    """copp-py's TOPP3-LP on the same knots, linearised at its TOPP2-RA profile and then at its
-    own twice (it holds the jerk at the stations only, so it may be shorter)."""
-    copp = pytest.importorskip("copp_py")
+    """copp-py's TOPP3-LP on the same knots (``scripts/bench_jerk.py``'s call: linearised at its
+    TOPP2-RA profile, then twice at its own; it holds the jerk at the stations only, so it may
+    be shorter)."""
+    pytest.importorskip("copp_py")
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "scripts"))
+    from bench_jerk import copp_topp3
+
     robot = _arm("panda").with_limits(effort=1e300)
     path = _spline(robot, 0)
     timing = jerk_limited_timing(robot, path, JERK, grid=200, torque=False)
-    sigma = timing.s
-    crobot = copp.Robot(robot.n, capacity=sigma.size)
-    crobot.append_s(sigma)
-    crobot.set_q(path(sigma, 0), path(sigma, 1), path(sigma, 2), 0, dddq=path(sigma, 3))
-    v, a, j = robot.limits.velocity, np.full(robot.n, ACCELERATION), np.full(robot.n, JERK)
-    crobot.add_velocity_limits(v, -v, start_idx_s=0, length=sigma.size)
-    crobot.add_acceleration_limits(a, -a, start_idx_s=0, length=sigma.size)
-    crobot.add_jerk_limits(j, -j, start_idx_s=0, length=sigma.size)
-    ra = copp.solver.topp2_ra
-    first = ra.Problem(
-        crobot.constraints, idx_s_interval=(0, sigma.size - 1), a_boundary=(0.0, 0.0)
-    )
-    a_lin, b_lin = np.maximum(np.asarray(ra.solve(first, ra.Options())), 1e-6), None
-    for _ in range(3):
-        problem = copp.solver.topp3_lp.Problem(
-            crobot.constraints, a_lin, b_linearization=b_lin, num_stationary_max=1
-        )
-        profile = copp.solver.topp3_lp.solve(problem)
-        a_lin, b_lin = np.maximum(np.asarray(profile.a), 1e-10), np.asarray(profile.b)
-    theirs = copp.interpolation.s_to_t_topp3(sigma, profile)[0]
+    theirs = copp_topp3(robot, path, timing.s)[0]
     assert timing.duration <= 1.01 * theirs
 
 

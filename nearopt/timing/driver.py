@@ -4,7 +4,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from functools import cached_property
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -13,7 +12,7 @@ from ..cost import Cost, TimeCost, check_cost
 from ..errors import ConfigurationError, SolverError
 from ..path import Path
 from ..robot import check_robot
-from ..trajectory import Trajectory
+from ..trajectory import MotionCost, Trajectory
 from .between import BetweenSamples, inherit_margins, tighten, uniform_slow_down
 from .problem import build_timing_problem
 from .solvers import TimingMethod, TimingSolution, TimingStatus, out_of_time, solve_timing
@@ -28,7 +27,7 @@ __all__ = ["TimingResult", "optimal_timing"]
 
 
 @dataclass(frozen=True)
-class TimingResult:
+class TimingResult(MotionCost):
     """The optimal timing of a path: a trajectory and its cost.
 
     Attributes
@@ -59,16 +58,6 @@ class TimingResult:
     iterations: int
     message: str
     wall_time: float
-
-    @cached_property
-    def J(self) -> float:  # noqa: N802 - the paper's name
-        """∫ f0 dt of the returned motion [s·(unit of f0)], by adaptive Gauss-Kronrod quadrature."""
-        return self.trajectory.integrate(self.cost)
-
-    @property
-    def duration(self) -> float:
-        """t_e [s]."""
-        return self.trajectory.duration
 
 
 def optimal_timing(

@@ -41,7 +41,6 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
-from functools import cached_property
 from math import comb
 
 import clarabel
@@ -53,7 +52,7 @@ from ..cost import Cost, TimeCost, TorqueCost
 from ..errors import ConfigurationError, SolverError
 from ..path import Path
 from ..robot import Robot
-from ..trajectory import InverseDynamics, Motion
+from ..trajectory import InverseDynamics, Motion, MotionCost
 
 __all__ = [
     "JerkTiming",
@@ -944,7 +943,7 @@ class SmoothTrajectory(Motion):
 
 
 @dataclass(frozen=True)
-class JerkTimingResult:
+class JerkTimingResult(MotionCost):
     """A path's jerk-limited timing as a plan returns it (the counterpart of
     :class:`~nearopt.timing.TimingResult`).
 
@@ -964,16 +963,6 @@ class JerkTimingResult:
     cost: Cost
     timing: JerkTiming
     wall_time: float
-
-    @cached_property
-    def J(self) -> float:  # noqa: N802 - the paper's name
-        """∫ f0 dt of the motion, by adaptive Gauss–Kronrod quadrature."""
-        return self.trajectory.integrate(self.cost)
-
-    @property
-    def duration(self) -> float:
-        """t_e [s]."""
-        return self.trajectory.duration
 
 
 def time_with_jerk_limits(
