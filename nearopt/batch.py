@@ -178,9 +178,12 @@ def _no_repeated_keys(pairs: list[tuple[str, Any]]) -> dict[str, Any]:
 
 
 def _is_json(value: object) -> bool:
-    """Whether a value is one JSON holds: a string, number, true/false, null or a list."""
+    """Whether a value is one JSON holds: a string, number, true/false, null, a list or an
+    object (a value of the wrong kind for its option fails its motion, not the batch)."""
     if isinstance(value, list):
         return all(_is_json(v) for v in value)
+    if isinstance(value, dict):
+        return all(isinstance(k, str) and _is_json(v) for k, v in value.items())
     return value is None or isinstance(value, str | int | float | bool)
 
 

@@ -578,3 +578,21 @@ def test_an_in_process_scheduler_address_is_left_to_dask() -> None:
         )
     assert outcome.status == OutcomeStatus.PLANNED, outcome.error
     np.testing.assert_allclose(outcome.result.trajectory(outcome.te, 0)[0], [0.3, 0.3], atol=1e-9)
+
+
+def test_an_option_of_the_wrong_kind_fails_its_motion_not_the_batch(tmp_path: Path) -> None:
+    """A JSON object where a number is asked for (``"jerk_limit": {"joint1": 5}``) is a JSON
+    value: the file is read, that motion fails with the option named, the others are planned
+    (it aborted the whole batch, nothing planned)."""
+    motions = tmp_path / "m.jsonl"
+    motions.write_text(
+        '{"id": "bad", "robot": "two_link", "q0": [0, 0], "qe": [1, 0.5], '
+        '"jerk_limit": {"joint1": 5}}\n'
+        '{"id": "good", "robot": "two_link", "q0": [0, 0], "qe": [1, 0.5], "stage1_only": true}\n'
+    )
+    assert [r.id for r in read_requests(motions)] == ["bad", "good"]
+    run = batch(str(motions), "--out", str(tmp_path / "out"), "--workers", "1", timeout=300)
+    assert run.returncode == 1 and "Traceback" not in run.stderr, run.stderr
+    error = json.loads((tmp_path / "out" / "failed" / "bad.json").read_text())["error"]
+    assert "jerk_limit" in error
+    assert (tmp_path / "out" / "good.json").is_file()
