@@ -141,6 +141,17 @@ class JerkTiming:
                 da = np.where(end, (2 / 9) * beta * r ** (-2 / 3) / d**2, da)
         return b, a, da
 
+    def rates(self, path: Path, s: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """θ̇, θ̈ and θ⃛ = √b (θ‴ b + 3θ″ a + θ′ a′) of ``path`` under this timing at the path
+        parameters s, each of shape (len(s), n)."""
+        s = np.atleast_1d(np.asarray(s, dtype=float))
+        b, a, da = self.evaluate(s)
+        q1, q2, q3 = np.asarray(path(s, 1)), np.asarray(path(s, 2)), _third(path, s)
+        root = np.sqrt(b)[:, None]
+        with np.errstate(invalid="ignore"):
+            third = root * (q3 * b[:, None] + 3 * q2 * a[:, None] + q1 * da[:, None])
+        return q1 * root, q2 * b[:, None] + q1 * a[:, None], third
+
     def segment_times(self) -> NDArray[np.float64]:
         """Each segment's duration [s]: 16-point Gauss–Legendre inside, exact at the ends."""
         x, w = np.polynomial.legendre.leggauss(16)
@@ -268,18 +279,11 @@ def _slowed_down(
     limit then at most 1 − 1e-9."""
     x = np.concatenate([[1e-9], np.linspace(0.0, 1.0, 34)[1:-1], [1.0 - 1e-9]])  # both ends too
     s = (timing.s[:-1, None] + x[None, :] * np.diff(timing.s)[:, None]).ravel()
-    b, a, da = timing.evaluate(s)
-    q1, q2 = np.asarray(path(s, 1)), np.asarray(path(s, 2))
-    try:
-        q3 = np.asarray(path(s, 3))  # type: ignore[arg-type]
-    except ValueError:
-        q3 = np.zeros_like(q1)
-    root = np.sqrt(b)[:, None]
+    qd, qdd, qddd = timing.rates(path, s)
     with np.errstate(divide="ignore", invalid="ignore"):
-        speed = np.nanmax(np.abs(q1 * root) / robot.limits.velocity)
-        accel = np.nanmax(np.abs(q2 * b[:, None] + q1 * a[:, None]) / acc)
-        third = root * (q3 * b[:, None] + 3 * q2 * a[:, None] + q1 * da[:, None])
-        jerks = np.nanmax(np.abs(third) / jerk)
+        speed = np.nanmax(np.abs(qd) / robot.limits.velocity)
+        accel = np.nanmax(np.abs(qdd) / acc)
+        jerks = np.nanmax(np.abs(qddd) / jerk)
     keep = 1.0 - 1e-9
     ratios = np.array([speed**2, accel, jerks ** (2 / 3)])  # each ∝ κ: what κ = 1 leaves
     kappa = min(1.0, keep / max(float(np.max(ratios)), 1e-300))
@@ -314,15 +318,19 @@ def _grid(path: Path, segments: int) -> NDArray[np.float64]:
     return np.unique(np.concatenate([s, s[1] * halves, s[-1] - (s[-1] - s[-2]) * halves]))
 
 
+def _third(path: Path, s: NDArray[np.float64]) -> NDArray[np.float64]:
+    """θ‴(s), shape (len(s), n); 0 for a path that has no third derivative (a straight line)."""
+    try:
+        return np.asarray(path(s, 3))  # type: ignore[arg-type]
+    except ValueError:
+        return np.zeros((np.size(s), path.dof))
+
+
 def _derivatives(path: Path, s0: NDArray, d: NDArray, nodes: NDArray) -> tuple[NDArray, ...]:
     """θ', θ'', θ''' of each segment's cubic at the σ nodes, shape (N, P, n) each, from its
     derivatives at the segment's midpoint (exact for a cubic; away from its breakpoints)."""
     mid = s0 + 0.5 * d
-    p1, p2 = np.asarray(path(mid, 1)), np.asarray(path(mid, 2))
-    try:
-        p3 = np.asarray(path(mid, 3))  # type: ignore[arg-type]
-    except ValueError:  # a straight line: θ'' = θ''' = 0
-        p3 = np.zeros_like(p1)
+    p1, p2, p3 = np.asarray(path(mid, 1)), np.asarray(path(mid, 2)), _third(path, mid)
     u = ((nodes[None, :] - 0.5) * d[:, None])[..., None]  # (N, P, 1)
     d1 = p1[:, None, :] + p2[:, None, :] * u + 0.5 * p3[:, None, :] * u**2
     d2 = p2[:, None, :] + p3[:, None, :] * u
@@ -340,9 +348,8 @@ class _Rows:
         self.h: list[NDArray] = []
         self.count = 0
 
-    def add(self, cols: NDArray, vals: NDArray, h: NDArray) -> slice:
-        """Rows with the coefficients vals[r, :] at the columns cols[r, :] (A) and h[r]; their
-        position."""
+    def add(self, cols: NDArray, vals: NDArray, h: NDArray) -> None:
+        """Rows with the coefficients vals[r, :] at the columns cols[r, :] (A) and h[r]."""
         cols, vals = np.atleast_2d(cols), np.atleast_2d(vals)
         cols, vals = np.broadcast_arrays(cols, vals)
         h = np.broadcast_to(np.asarray(h, dtype=float), (cols.shape[0],))
@@ -352,7 +359,6 @@ class _Rows:
         self.vals.append(vals.ravel().astype(float))
         self.h.append(h.copy())
         self.count += cols.shape[0]
-        return slice(int(at[0]) if at.size else self.count, self.count)
 
     def matrix(self, columns: int) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
         if not self.rows:
@@ -529,11 +535,7 @@ class _Model:
         x = x[1:] if sign > 0 else x[:-1]  # not at rest, where b = 0
         r = x if sign > 0 else 1.0 - x
         at = self.s[k] + x * d
-        q1, q2 = np.asarray(path(at, 1)), np.asarray(path(at, 2))
-        try:
-            q3 = np.asarray(path(at, 3))  # type: ignore[arg-type]
-        except ValueError:
-            q3 = np.zeros_like(q1)
+        q1, q2, q3 = np.asarray(path(at, 1)), np.asarray(path(at, 2)), _third(path, at)
         r = r[:, None]
         lim = robot.limits
         caps = [np.inf]
@@ -933,13 +935,7 @@ class SmoothTrajectory(Motion):
         # at rest √b → 0 and a′ → ∞ with a finite product: its limit from just inside
         ends = 1e-9 * np.diff(self.s)[[0, -1]]
         s = np.clip(s, self.s[0] + ends[0], self.s[-1] - ends[1])
-        b, a, da = self.timing.evaluate(s)
-        try:
-            d3 = np.asarray(self.path(s, 3))  # type: ignore[arg-type]
-        except ValueError:
-            d3 = np.zeros((s.size, self.dof))
-        inner = d3 * b[:, None] + 3 * self.path(s, 2) * a[:, None] + self.path(s, 1) * da[:, None]
-        return np.where(outside[:, None], 0.0, np.sqrt(b)[:, None] * inner)
+        return np.where(outside[:, None], 0.0, self.timing.rates(self.path, s)[2])
 
 
 @dataclass(frozen=True)
