@@ -14,7 +14,8 @@ from conftest import load
 
 import nearopt
 from nearopt.timing import jerk_limited_timing, optimal_timing, time_with_jerk_limits
-from nearopt.timing.jerk import SmoothTrajectory
+from nearopt.timing.jerk import SmoothTrajectory, _grid, _Model
+from nearopt.timing.solvers import TimingMethod
 
 JERK, ACCELERATION = 50.0, 10.0
 
@@ -53,6 +54,7 @@ def test_the_limits_hold_for_all_s_and_the_motion_starts_and_stops_smoothly(
     robot = _arm(name)
     path = _spline(robot, seed)
     timing = jerk_limited_timing(robot, path, JERK, grid=60)
+    assert set(timing.solvers) == {TimingMethod.INTERIOR}  # the banded kernel, no fallback
     qd, qdd, qddd, s = _dense(timing, path)
     assert np.max(np.abs(qd) / robot.limits.velocity) <= 1.0
     assert np.max(np.abs(qdd)) <= ACCELERATION
@@ -123,6 +125,49 @@ def test_within_one_percent_of_copp_topp3() -> None:
     timing = jerk_limited_timing(robot, path, JERK, grid=200, torque=False)
     theirs = copp_topp3(robot, path, timing.s)[0]
     assert timing.duration <= 1.01 * theirs
+
+
+@pytest.mark.parametrize("name", ["two_link", "xarm7"])
+def test_the_banded_kernel_solves_the_conic_restriction(name: str) -> None:
+    """One convex restriction (the first, torque rows included; xarm7's damping gives rows with
+    √b and an energy cost) solved by the banded kernel and by Clarabel's SOCP: the kernel's
+    solution holds every row of the conic model (C¹ equalities, speed, acceleration, jerk,
+    torque with the damping's δ√b exact) and its J, recomputed from the timing it gives, is
+    Clarabel's to 1e-4 (Clarabel stops at "almost solved", a little outside some rows)."""
+    robot = load(name).with_limits(acceleration=ACCELERATION, jerk=JERK)
+    path = _spline(robot, 1)
+    cost = nearopt.TorqueCost(1e-3) if name == "xarm7" else None
+    weights = None if cost is None else cost.torque_weights(robot.n)
+    model = _Model(
+        robot, path, _grid(path, 60), robot.limits.jerk, robot.limits.acceleration, True, weights
+    )
+    bbar = model.first_linearisation()
+    ours, value = model.solve(bbar, None, TimingMethod.INTERIOR)
+    assert model.solver is TimingMethod.INTERIOR
+    theirs, their_value = model.solve(bbar, None, TimingMethod.SOCP)
+    assert value == pytest.approx(their_value, rel=1e-4)
+    a_eq, h_eq = model.eq.matrix(model.nv)
+    assert np.max(np.abs(a_eq @ ours - h_eq)) <= 1e-12 * np.max(np.abs(ours))
+    for rows in (model.fixed, model._jerk_rows(bbar)):
+        a, h = rows.matrix(model.nv)
+        a = a[:, : model.iB[-1] + 1]  # b, m and B (a damped arm's torque rows: below)
+        size = np.abs(a).max(axis=1).toarray().ravel() * np.max(np.abs(ours))
+        finite = np.isfinite(h) & (np.asarray(a.sum(axis=1)).ravel() != 0)
+        excess = (a @ ours[: model.iB[-1] + 1] - h)[finite] / size[finite]
+        assert np.max(excess) <= 1e-9
+    pts = model.tq
+    columns = ours[pts.cols]
+    root = np.einsum("pc,pc->p", pts.root_w, columns)
+    u = np.einsum("pnc,pc->pn", pts.affine(), columns) + pts.g
+    u += pts.delta * (pts.kappa * np.sqrt(root))[:, None]
+    assert np.all(u <= robot.limits.effort_upper * (1 + 1e-9))
+    assert np.all(u >= robot.limits.effort_lower * (1 + 1e-9))
+    timing = model.timing(ours, (value,))
+    if cost is None:  # J = t_e: the kernel's quadrature against the timing's own
+        assert timing.duration == pytest.approx(value, rel=1e-6)
+    else:
+        motion = SmoothTrajectory(path, timing, robot.inverse_dynamics_batch)
+        assert motion.integrate(cost) <= value * (1 + 1e-4)  # the model's J is a majorant
 
 
 def test_the_smooth_trajectory_in_time() -> None:
@@ -227,6 +272,7 @@ def test_a_task_with_jerk_limits() -> None:
         ({"jerk": 50.0, "max_iterations": 0}, "max_iterations must be an integer ≥ 1"),
         ({"jerk": 50.0, "acceleration": 0.0}, "acceleration limit of joint 'joint1' is 0"),
         ({"jerk": 50.0, "acceleration": np.nan}, "acceleration limit of joint 'joint1' is nan"),
+        ({"jerk": 50.0, "method": TimingMethod.NLP}, "method is TimingMethod.INTERIOR or SOCP"),
     ],
 )
 def test_bad_arguments_of_the_jerk_limited_timing(arguments: dict, message: str) -> None:

@@ -369,7 +369,7 @@ def _start(
 def load_kernel() -> None:
     """Load the compiled kernels into this process now (compiling them if no cached copy fits),
     by solving a small problem: about 1 s when cached, 10–20 s the first time on a machine
-    (stage 2's joint solver's loops too).
+    (stage 2's joint solver's loops and the jerk-limited timing's banded kernel too).
 
     The first stage-1 solve of a process does this by itself; call it before forking children
     that should not touch the file system (or cannot read the package's folder after dropping
@@ -412,6 +412,25 @@ def load_kernel() -> None:
     )
     solve_interior(Discretisation(problem), np.array([0.1]))
     _load_joint_kernels()
+    _load_banded_kernels()
+
+
+def _load_banded_kernels() -> None:
+    """The jerk-limited timing's compiled loops (:mod:`nearopt.timing.banded`): min 1/√z over
+    two variables under z ≤ 1, one row implied by another."""
+    from ._banded_kernels import implied_rows
+    from .banded import BandedProgram, solve_banded
+
+    one, two = np.ones(1), np.ones((1, 2))
+    solve_banded(
+        BandedProgram(
+            np.zeros(2, dtype=np.int64), np.eye(2), np.zeros(2), np.zeros((2, 2)), np.ones(2),
+            np.zeros(1, dtype=np.int64), two, one, one, np.zeros((1, 0, 2)), np.zeros((1, 0)),
+            np.zeros(0), np.zeros(2),
+        ),
+        np.full(2, 0.5),
+    )  # fmt: skip
+    implied_rows(np.arange(2), np.array([0, 2]), np.eye(2), np.ones(2))
 
 
 def _load_joint_kernels() -> None:

@@ -1,6 +1,5 @@
 """Jerk-limited timing of a path: |θ⃛_i(t)| ≤ j_i for all t, by sequential convex programming
-whose every iterate is feasible. Work in progress of the jerk-limit issue: time-optimal, arms
-without joint damping; not yet used by :func:`~nearopt.plan`.
+whose every iterate is feasible.
 
 The timing is b(s) = ṡ², C¹ in s, so that θ̈ = θ''b + θ'a (a = b'/2) is continuous and
 θ⃛ = √b · L with L = θ'''b + 3θ''a + θ'a' is bounded. On each segment [s_k, s_{k+1}] of the grid,
@@ -33,8 +32,17 @@ the hull of its Bernstein coefficients):
 
 The end segments' quantities are β^p times known functions of σ (speed and acceleration p = 1,
 jerk p = 3/2): each gives a bound on β. The duration Σ_k Δ_k ∫ dσ/√b is 4-point Gauss–Legendre
-quadrature inside (τ ≥ 1/√b as w ≤ √b, τ w ≥ 1: two second-order cones per point) and exact at
-the ends, solved by Clarabel.
+quadrature inside and exact at the ends.
+
+Each convex restriction is solved by the banded interior-point kernel of
+:mod:`nearopt.timing.banded`: with every segment's m as a variable and every inner knot's b the
+Δ-weighted mean of its two neighbouring m (the C¹ condition, by construction; the end segments'
+conditions fix the first and last m to β), each row and each term of J touches 5 consecutive
+variables (a segment's m, its neighbours' and its B_k), so a Newton step is a banded Cholesky
+factorisation, O(N); rows another row of the same segment implies (for b ≥ 0) are left out.
+Clarabel's second-order cone program of the same restriction (τ ≥ 1/√b as w ≤ √b, τ w ≥ 1: two
+cones per point; the C¹ conditions as equalities) is the reference (``method=SOCP``) and the
+fallback where the kernel does not converge.
 """
 
 from __future__ import annotations
@@ -53,6 +61,9 @@ from ..errors import ConfigurationError, SolverError
 from ..path import Path
 from ..robot import Robot
 from ..trajectory import InverseDynamics, Motion, MotionCost
+from ._banded_kernels import implied_rows
+from .banded import BandedProgram, solve_banded, windows
+from .solvers import TimingMethod
 
 __all__ = [
     "JerkTiming",
@@ -107,12 +118,17 @@ class JerkTiming:
         J after each convex program of the last refinement of the torque rows, by the model's
         quadrature (time-optimal: the duration [s]; non-increasing, up to the convex solver's
         tolerance); the timing is the best of them.
+    solvers
+        The back end of each of those programs: :attr:`TimingMethod.INTERIOR` (the banded
+        kernel, :mod:`nearopt.timing.banded`) or :attr:`TimingMethod.SOCP` (Clarabel: asked
+        for, or where the kernel did not converge).
     """
 
     s: NDArray[np.float64]
     b: NDArray[np.float64]
     m: NDArray[np.float64]
     history: tuple[float, ...]
+    solvers: tuple[TimingMethod, ...] = ()
 
     @property
     def iterations(self) -> int:
@@ -204,6 +220,7 @@ def jerk_limited_timing(
     torque: bool = True,
     max_iterations: int = 30,
     tolerance: float = 1e-6,
+    method: TimingMethod = TimingMethod.INTERIOR,
 ) -> JerkTiming:
     """The C¹ timing of ``path`` that minimises J = ∫ f0 dt (``cost``: time, the default, or
     :class:`~nearopt.TorqueCost`'s 1 + Σ w u²), from rest to rest with θ̈ = 0 at both ends, under
@@ -213,13 +230,15 @@ def jerk_limited_timing(
     where concave, by the tangent at the last iterate: every iterate stays feasible).
 
     Stops when an iteration lowers J (by the model's quadrature) by less than ``tolerance``
-    (relative) or after ``max_iterations``.
+    (relative) or after ``max_iterations``. ``method``: each convex program by the banded kernel
+    (:attr:`TimingMethod.INTERIOR`, Clarabel where it does not converge) or by Clarabel's SOCP
+    (:attr:`TimingMethod.SOCP`); :attr:`JerkTiming.solvers` says which solved.
 
     Raises
     ------
     ConfigurationError
         Jerk or acceleration limits that are not positive numbers (one, or one per joint), a
-        grid below 4 segments, ``max_iterations`` below 1, or another cost.
+        grid below 4 segments, ``max_iterations`` below 1, another cost or another method.
     SolverError
         If a convex program fails.
     """
@@ -232,6 +251,10 @@ def jerk_limited_timing(
     for name, value, low in (("grid", grid, 4), ("max_iterations", max_iterations, 1)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
             raise ConfigurationError(f"{name} must be an integer ≥ {low}, got {value!r}")
+    if method not in (TimingMethod.INTERIOR, TimingMethod.SOCP):
+        raise ConfigurationError(
+            f"the jerk-limited timing's method is TimingMethod.INTERIOR or SOCP, got {method!r}"
+        )
     if cost is None or isinstance(cost, TimeCost):
         weights = None
     elif isinstance(cost, TorqueCost):
@@ -248,10 +271,12 @@ def jerk_limited_timing(
     extra = (np.zeros(0, dtype=np.int64), np.zeros(0))
     for _ in range(1 + REFINEMENTS):
         history: list[float] = []
+        solvers: list[TimingMethod] = []
         best: tuple[float, NDArray[np.float64]] | None = None
         for _ in range(max_iterations):
-            x, value = model.solve(bbar, x)
+            x, value = model.solve(bbar, x, method)
             history.append(value)
+            solvers.append(model.solver)
             if best is None or value < best[0]:  # (equal up to the solver's 1e-8)
                 best = (value, x)
             if len(history) > 1 and history[-2] - value <= tolerance * abs(value):
@@ -267,7 +292,8 @@ def jerk_limited_timing(
         extra = (np.concatenate([extra[0], more[0]]), np.concatenate([extra[1], more[1]]))
         model = _Model(robot, path, s, jerk, acc, torque, weights, extra)
         x = x[: model.iB[-1] + 1]  # b, m and B keep their places: the roots read them
-    return _slowed_down(model.timing(x, tuple(history)), robot, path, acc, jerk)
+    timing = model.timing(x, tuple(history), tuple(solvers))
+    return _slowed_down(timing, robot, path, acc, jerk)
 
 
 def _slowed_down(
@@ -289,8 +315,12 @@ def _slowed_down(
     kappa = min(1.0, keep / max(float(np.max(ratios)), 1e-300))
     if kappa >= 1.0:
         return timing
-    return JerkTiming(timing.s, kappa * timing.b, kappa * timing.m, timing.history)
+    return JerkTiming(timing.s, kappa * timing.b, kappa * timing.m, timing.history, timing.solvers)
 
+
+_WIDTH = 5
+"""The banded kernel's window: a segment's rows touch its own and its neighbours' m (and its
+B), 5 consecutive variables of z (see :meth:`_Model.reduction`)."""
 
 END_LEVELS = 5
 """The first and last segments are halved this many times (knots at Δ/2, Δ/4, … from each end):
@@ -472,6 +502,7 @@ class _Model:
             if np.isfinite(cap):
                 ineq.add(np.array([[beta]]), one, cap)
         self.limits, self.weights = lim, weights
+        self.kernel_iterations = 0
         self.damped = bool(np.any(robot.damping))
         self.tq: _Points | None = None
         if torque and np.any(np.isfinite(lim.effort_upper) | np.isfinite(lim.effort_lower)):
@@ -666,22 +697,13 @@ class _Model:
     def _cones(self) -> tuple[sp.csr_matrix, NDArray[np.float64], NDArray[np.float64], list]:
         """τ ≥ 1/√b at every quadrature point (two second-order cones of 3: ‖(2w, b − 1)‖ ≤
         b + 1 and ‖(2, τ − w)‖ ≤ τ + w), and the objective Σ Δ w_q τ (3Δ τ at the ends)."""
-        last, d = self.d.size - 1, self.d
+        last = self.d.size - 1
         rows = _Rows()
         objective = np.zeros(self.nv)
-        inner, ib = self.inner, self.ib
-        # the points: inner segments × 4 (b from 3 Bézier coefficients), then the 2 ends (β)
+        inner = self.inner
         tau = np.concatenate([self.it[inner].ravel(), self.it[[0, last], 0]])
         w = np.concatenate([self.iw[inner].ravel(), self.iw[[0, last], 0]])
-        b_cols = np.vstack(
-            [np.repeat(self.cols3, 4, axis=0), [[ib[1], ib[1], ib[1]], [ib[last]] * 3]]
-        )
-        b_vals = np.vstack(
-            [np.tile(_bernstein(2, _GAUSS_X), (inner.size, 1)), [[1.0, 0, 0], [1.0, 0, 0]]]
-        )
-        objective[tau] = np.concatenate(
-            [(d[inner][:, None] * _GAUSS_W[None, :]).ravel(), [3.0 * d[0], 3.0 * d[last]]]
-        )
+        b_cols, b_vals, objective[tau] = self._time_points()
         points = tau.size
         block = np.zeros((points, 6, 3), dtype=np.int64)  # columns of the 6 rows of a point
         value = np.zeros((points, 6, 3))
@@ -704,13 +726,29 @@ class _Model:
             rows.add(block.reshape(-1, 3), value.reshape(-1, 3), bound)
         a, h = rows.matrix(self.nv)
         cones = [clarabel.SecondOrderConeT(3)] * (a.shape[0] // 3)
-        objective[self.iB] = 1e-9 * float(np.sum(d))  # B_k no larger than its rows need
+        objective[self.iB] = 1e-9 * float(np.sum(self.d))  # B_k no larger than its rows need
         if self.cp is not None:
             a_cost, h_cost, linear = self._cost_cones()
             a, h = sp.vstack([a, a_cost]), np.concatenate([h, h_cost])
             cones += [clarabel.SecondOrderConeT(self.cp.m.shape[1] + 2)] * self.cp.seg.size
             objective += linear
         return a.tocsr(), h, objective, cones
+
+    def _time_points(self) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """The duration's quadrature: Σ ω / √b over 4 Gauss points on every inner segment (b
+        from its 3 Bézier coefficients) and the 2 ends' exact 3Δ/√β: columns, weights of b at
+        each point, and ω."""
+        last, d, inner, ib = self.d.size - 1, self.d, self.inner, self.ib
+        b_cols = np.vstack(
+            [np.repeat(self.cols3, 4, axis=0), [[ib[1], ib[1], ib[1]], [ib[last]] * 3]]
+        )
+        b_vals = np.vstack(
+            [np.tile(_bernstein(2, _GAUSS_X), (inner.size, 1)), [[1.0, 0, 0], [1.0, 0, 0]]]
+        )
+        omega = np.concatenate(
+            [(d[inner][:, None] * _GAUSS_W[None, :]).ravel(), [3.0 * d[0], 3.0 * d[last]]]
+        )
+        return b_cols, b_vals, omega
 
     def _cost_cones(self) -> tuple[sp.csr_matrix, NDArray[np.float64], NDArray[np.float64]]:
         """Σ_j w_j (A_j x + g_j)² ≤ ε ρ at every cost point (ρ ≤ √root: ε ≥ the undamped
@@ -773,28 +811,48 @@ class _Model:
         return np.maximum(np.einsum("pc,pc->p", points.root_w, x[points.cols]), 1e-12)
 
     def solve(
-        self, bbar: NDArray[np.float64], previous: NDArray[np.float64] | None = None
+        self,
+        bbar: NDArray[np.float64],
+        previous: NDArray[np.float64] | None = None,
+        method: TimingMethod = TimingMethod.INTERIOR,
     ) -> tuple[NDArray[np.float64], float]:
         """The convex restriction at B̄ (and, for a damped arm's torques and an energy cost,
         at the previous solution's b): the solution vector and the objective (J by the
-        model's quadrature, a majorant of it where the damping enters)."""
+        model's quadrature, a majorant of it where the damping enters). ``method``: the banded
+        interior-point kernel (:mod:`nearopt.timing.banded`; Clarabel where it does not
+        converge) or Clarabel's SOCP."""
+        per_iteration = self._jerk_rows(bbar)
+        if self.tq is not None and self.damped:
+            self._torque_rows(per_iteration, self.roots(self.tq, previous, bbar))
+        objective, offset = self._objective(bbar, previous)
+        if method is TimingMethod.INTERIOR:
+            answer = self._solve_banded(bbar, previous, per_iteration, objective)
+            if answer is not None:
+                self.solver = TimingMethod.INTERIOR
+                return answer[0], answer[1] + offset
+        self.solver = TimingMethod.SOCP
+        x, value = self._solve_conic(bbar, per_iteration, objective)
+        return x, value + offset
+
+    def _jerk_rows(self, bbar: NDArray[np.float64]) -> _Rows:
+        """The jerk rows at B̄: coef · (b_k, m_k, b_{k+1}) + ½ j B̄^{-3/2} B_k ≤ 1.5 j / √B̄."""
         inner = self.inner
-        per_iteration = _Rows()
+        rows = _Rows()
         bb = bbar[inner]
+        cols = np.hstack([np.repeat(self.cols3, 5, axis=0), np.repeat(self.iB[inner], 5)[:, None]])
         for j, coef in self.jerk_rows:
             slope = np.repeat(0.5 * self.jerk[j] * bb**-1.5, 5)
             rhs = np.repeat((1.0 - MARGIN) * 1.5 * self.jerk[j] / np.sqrt(bb), 5)
-            cols = np.hstack(
-                [np.repeat(self.cols3, 5, axis=0), np.repeat(self.iB[inner], 5)[:, None]]
-            )
-            per_iteration.add(cols, np.hstack([coef, slope[:, None]]), rhs)
-        if self.tq is not None and self.damped:
-            self._torque_rows(per_iteration, self.roots(self.tq, previous, bbar))
-        a_eq, h_eq = self.eq.matrix(self.nv)
-        a_fix, h_fix = self.fixed.matrix(self.nv)
-        a_it, h_it = per_iteration.matrix(self.nv)
-        a_cone, h_cone, objective, cone_list = self.cones
-        objective = objective.copy()
+            rows.add(cols, np.hstack([coef, slope[:, None]]), rhs)
+        return rows
+
+    def _objective(
+        self, bbar: NDArray[np.float64], previous: NDArray[np.float64] | None
+    ) -> tuple[NDArray[np.float64], float]:
+        """The conic program's linear objective (the damped energy's δ²√b by its tangent at
+        the last b) and the constant it leaves out."""
+        objective = self.cones[2].copy()
+        offset = 0.0
         if self.cp is not None and self.damped:  # Σ ω w_j δ_j² κ² √root by its tangent
             pts = self.cp
             rbar = self.roots(pts, previous, bbar)
@@ -805,10 +863,18 @@ class _Model:
                 ((c / (2 * np.sqrt(rbar)))[:, None] * pts.root_w).ravel(),
             )
             offset = float(np.sum(c * np.sqrt(rbar) / 2))
-        else:
-            offset = 0.0
         if self.cp is not None:
             offset += self.cost_constant  # Σ ω 2 Σ w δ κ g: no variable in it
+        return objective, offset
+
+    def _solve_conic(
+        self, bbar: NDArray[np.float64], per_iteration: _Rows, objective: NDArray[np.float64]
+    ) -> tuple[NDArray[np.float64], float]:
+        """Clarabel's SOCP of the restriction (every variable of the module docstring)."""
+        a_eq, h_eq = self.eq.matrix(self.nv)
+        a_fix, h_fix = self.fixed.matrix(self.nv)
+        a_it, h_it = per_iteration.matrix(self.nv)
+        a_cone, h_cone, _, cone_list = self.cones
         # the variables in units where b is about 1 (the solver's tolerances have an absolute
         # floor: with b ~ 1e-5 they would leave ~1 % of a jerk row), and each linear row's
         # largest coefficient 1
@@ -832,7 +898,170 @@ class _Model:
         ).solve()
         if str(solution.status) not in ("Solved", "AlmostSolved"):
             raise SolverError(f"the jerk-limited timing's convex program: {solution.status}")
-        return columns * np.asarray(solution.x), float(solution.obj_val) + offset
+        return columns * np.asarray(solution.x), float(solution.obj_val)
+
+    def reduction(self) -> sp.csr_matrix:
+        """T: x = T z, the model's b, m and B from the banded kernel's variables z, which hold
+        the C¹ conditions by construction: per inner segment k (in order) its middle Bézier
+        coefficient m_k and B_k, where the first and the last inner segment's m stand for β
+        (m_1 = κ β, κ = 1 + ⅔ Δ_1/Δ_0, and likewise at the end), and every inner knot's
+        b_k = (Δ_k m_{k−1} + Δ_{k−1} m_k)/(Δ_{k−1} + Δ_k). Every other variable is 0."""
+        if getattr(self, "_reduction", None) is not None:
+            return self._reduction
+        big_n, d, last = self.d.size, self.d, self.d.size - 1
+        inner = self.inner  # 1 … N − 2
+        zm = 2 * (inner - 1)  # z's column of segment k's m
+        zb = zm + 1
+        kappa = np.ones(inner.size)
+        kappa[0] = 1.0 + (2.0 / 3.0) * d[1] / d[0]
+        kappa[-1] = 1.0 + (2.0 / 3.0) * d[last - 1] / d[last]
+        rows = [self.im[inner], self.iB[inner], [self.ib[1]], [self.ib[last]]]
+        cols = [zm, zb, [zm[0]], [zm[-1]]]
+        vals = [kappa, np.ones(inner.size), [1.0], [1.0]]
+        k = np.arange(2, big_n - 1)  # knots between two inner segments
+        total = d[k - 1] + d[k]
+        for side, weight in ((k - 1, d[k] / total), (k, d[k - 1] / total)):
+            rows.append(self.ib[k])
+            cols.append(zm[side - 1])
+            vals.append(weight * kappa[side - 1])
+        t = sp.csr_matrix(
+            (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
+            shape=(self.nv, 2 * inner.size),
+        )
+        self._reduction = t
+        return t
+
+    def _window_rows(
+        self, rows: _Rows, unit: float, prune: bool
+    ) -> tuple[NDArray[np.int64], NDArray, NDArray, NDArray, NDArray]:
+        """``rows`` over z (x = T·unit·z) in window form, each scaled so that its largest
+        coefficient is 1, without the rows another one implies (``prune``) and without those
+        on pinned variables only: start, a, e, ℓ, h. A damped arm's torque rows δ w (w ≤ √root,
+        see :meth:`_torque_rows`) become δ √(root)."""
+        t = self.reduction() * unit
+        a, h = rows.matrix(self.nv)
+        e = np.zeros(h.size)
+        ell_rows = sp.csr_matrix((h.size, self.nv))
+        if self.tq is not None and self.damped:
+            pts = self.tq
+            a = a.tocsc()
+            by_w = a[:, self.iwt].tocoo()  # at most one w per row
+            e[by_w.row] = by_w.data
+            roots = sp.csr_matrix(
+                (pts.root_w.ravel(), (np.repeat(np.arange(pts.seg.size), 3), pts.cols.ravel())),
+                shape=(pts.seg.size, self.nv),
+            )
+            pick = sp.csr_matrix(
+                (np.ones(by_w.row.size), (by_w.row, by_w.col)), shape=(h.size, pts.seg.size)
+            )
+            ell_rows = pick @ roots
+            without_w = np.ones(self.nv)
+            without_w[self.iwt] = 0.0
+            a = (a @ sp.diags(without_w)).tocsr()
+        start, (a_w, ell_w) = windows([(a @ t).tocsr(), (ell_rows @ t).tocsr()], _WIDTH)
+        scale = np.max(np.abs(a_w), axis=1)
+        keep = (scale > 0.0) | (e != 0.0)
+        if np.any(~keep & (h < 0.0)):
+            raise SolverError("the jerk-limited timing: a row without variables is violated")
+        scale = np.where(scale > 0.0, scale, 1.0)
+        a_w, e, h = a_w / scale[:, None], e / scale, h / scale
+        if prune:
+            order = np.argsort(start, kind="stable")
+            group = np.flatnonzero(np.diff(start[order], prepend=-1, append=-2))
+            keep &= ~implied_rows(order, group, a_w, np.where(e == 0.0, h, -np.inf))
+        return start[keep], a_w[keep], e[keep], ell_w[keep], h[keep]
+
+    def _window_terms(self) -> tuple[NDArray, ...]:
+        """The kernel's terms over z (x = T z): the duration at its Gauss points (c0 = 1), then
+        the energy's cost points (c0 = 0, the squares w_j (A_j x + g_j)²): start, ℓ, ω, c0, α, g
+        and the squares' weights. Built once."""
+        if getattr(self, "_terms", None) is not None:
+            return self._terms
+        t = self.reduction()
+        b_cols, b_vals, omega = self._time_points()
+        count = omega.size
+        index = np.repeat(np.arange(count), 3)
+        ell = sp.csr_matrix((b_vals.ravel(), (index, b_cols.ravel())), shape=(count, self.nv))
+        n = self.weights.size if self.cp is not None else 0
+        start, (ell_w,) = windows([(ell @ t).tocsr()], _WIDTH)
+        parts = [(start, ell_w, omega, np.ones(count), np.zeros((count, n, _WIDTH)))]
+        g = [np.zeros((count, n))]
+        if self.cp is not None:
+            pts = self.cp
+            count = pts.seg.size
+            index = np.repeat(np.arange(count), 3)
+            roots = sp.csr_matrix(
+                (pts.root_w.ravel(), (index, pts.cols.ravel())), shape=(count, self.nv)
+            )
+            start, (ell_w,) = windows([(roots @ t).tocsr()], _WIDTH)
+            affine = pts.affine()  # (P, n, 3)
+            alphas = [
+                sp.csr_matrix(
+                    (affine[:, j, :].ravel(), (index, pts.cols.ravel())), shape=(count, self.nv)
+                )
+                @ t
+                for j in range(n)
+            ]
+            _, dense = windows([a.tocsr() for a in alphas], _WIDTH, start=start)
+            parts.append((start, ell_w, self.cost_omega, np.zeros(count), np.stack(dense, axis=1)))
+            g.append(pts.g)
+        weights = np.asarray(self.weights, dtype=float) if self.cp is not None else np.zeros(0)
+        self._terms = (*(np.concatenate(field) for field in zip(*parts, strict=True)),)
+        self._terms += (np.concatenate(g), weights)
+        return self._terms
+
+    def _solve_banded(
+        self,
+        bbar: NDArray[np.float64],
+        previous: NDArray[np.float64] | None,
+        per_iteration: _Rows,
+        objective: NDArray[np.float64],
+    ) -> tuple[NDArray[np.float64], float] | None:
+        """The restriction by the banded interior-point kernel, in z (:meth:`reduction`): the
+        duration's (and the energy's) epigraph cones become the kernel's terms Σ ω u/√b, the
+        damped torque rows' w ≤ √b its rows' √ terms, and rows another row of the same segment
+        implies are left out. None where it does not converge."""
+        unit = float(np.max(bbar[self.inner]))  # z in units where b is about 1
+        if getattr(self, "_fixed_rows", None) is None:  # the same for every B̄ but h ∝ 1/unit
+            self._fixed_rows = self._window_rows(self.fixed, 1.0, prune=True)
+        fixed = self._fixed_rows
+        now = self._window_rows(per_iteration, unit, prune=False)  # (jerk rows: none implied)
+        rows = [np.concatenate([f, c]) for f, c in zip(fixed[:4], now[:4], strict=True)]
+        h = np.concatenate([fixed[4] / unit, now[4]])
+        start, ell, omega, c0, alpha, g, weights = self._window_terms()
+        lin = objective.copy()
+        lin[self.it.ravel()] = 0.0  # in the terms
+        if self.cp is not None:
+            lin[self.ieps] = 0.0
+        program = BandedProgram(
+            rows[0].astype(np.int64), np.ascontiguousarray(rows[1]), rows[2],
+            np.ascontiguousarray(rows[3]), h,
+            start.astype(np.int64), ell * unit, omega, c0, alpha * unit, g, weights,
+            unit * (self.reduction().T @ lin),
+        )  # fmt: skip
+        z0 = self._banded_start(bbar, previous) / unit
+        solution = solve_banded(program, z0, tolerance=1e-9)
+        self.kernel_iterations += solution.iterations
+        if not solution.converged:
+            return None
+        return unit * (self.reduction() @ solution.z), solution.value
+
+    def _banded_start(
+        self, bbar: NDArray[np.float64], previous: NDArray[np.float64] | None
+    ) -> NDArray[np.float64]:
+        """z to start from: 0.9 times the last solution (strictly inside its rows where they
+        scale with b), or B̄ for every m and B at first."""
+        inner, last = self.inner, self.d.size - 1
+        z = np.zeros(2 * inner.size)
+        if previous is None:
+            z[0::2] = bbar[inner]
+            z[1::2] = bbar[inner]
+            return z
+        z[0::2] = previous[self.im[inner]]
+        z[0] = previous[self.ib[1]]
+        z[-2] = previous[self.ib[last]]
+        z[1::2] = previous[self.iB[inner]]
+        return 0.9 * np.maximum(z, 1e-12 * float(np.max(bbar)))
 
     def units(self, bbar: NDArray[np.float64]) -> NDArray[np.float64]:
         """Each variable's unit: S = the largest B̄ for b, m and B, √S for the w ≤ √b, 1/√S for
@@ -846,12 +1075,17 @@ class _Model:
             columns[self.iwt] = np.sqrt(unit)
         return columns
 
-    def timing(self, x: NDArray[np.float64], history: tuple[float, ...]) -> JerkTiming:
+    def timing(
+        self,
+        x: NDArray[np.float64],
+        history: tuple[float, ...],
+        solvers: tuple[TimingMethod, ...] = (),
+    ) -> JerkTiming:
         b = np.maximum(x[self.ib], 0.0)
         b[0] = b[-1] = 0.0
         m = x[self.im].copy()
         m[[0, -1]] = np.nan
-        return JerkTiming(self.s, b, m, history)
+        return JerkTiming(self.s, b, m, history, solvers)
 
 
 class SmoothTrajectory(Motion):
