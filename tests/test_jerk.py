@@ -170,6 +170,22 @@ def test_the_banded_kernel_solves_the_conic_restriction(name: str) -> None:
         assert motion.integrate(cost) <= value * (1 + 1e-4)  # the model's J is a majorant
 
 
+def test_at_its_time_limit_the_timing_returns_its_first_feasible_iterate() -> None:
+    """time_limit = 0: one convex program per refinement of the torque rows, every limit held
+    (every iterate is feasible), J no lower than with no limit; said in timed_out."""
+    robot = _arm("ur5")
+    path = _spline(robot, 0)
+    full = jerk_limited_timing(robot, path, JERK, grid=60)
+    cut = jerk_limited_timing(robot, path, JERK, grid=60, time_limit=0.0)
+    assert cut.timed_out and not full.timed_out
+    assert cut.iterations == 1 < full.iterations
+    assert cut.duration >= full.duration
+    qd, qdd, qddd, _ = _dense(cut, path)
+    assert np.max(np.abs(qd) / robot.limits.velocity) <= 1.0
+    assert np.max(np.abs(qdd)) <= ACCELERATION
+    assert np.max(np.abs(qddd)) <= JERK
+
+
 def test_the_smooth_trajectory_in_time() -> None:
     """SmoothTrajectory: s(t) inverts t(s) to rounding, θ̈ continuous, θ⃛ within the limit at
     20 kHz in time (finite at rest), and a 1 kHz record replays itself with θ̈ linear between
@@ -273,6 +289,8 @@ def test_a_task_with_jerk_limits() -> None:
         ({"jerk": 50.0, "acceleration": 0.0}, "acceleration limit of joint 'joint1' is 0"),
         ({"jerk": 50.0, "acceleration": np.nan}, "acceleration limit of joint 'joint1' is nan"),
         ({"jerk": 50.0, "method": TimingMethod.NLP}, "method is TimingMethod.INTERIOR or SOCP"),
+        ({"jerk": 50.0, "time_limit": -1.0}, "time_limit must be a number of seconds ≥ 0"),
+        ({"jerk": 50.0, "time_limit": "1"}, "time_limit must be a number of seconds ≥ 0"),
     ],
 )
 def test_bad_arguments_of_the_jerk_limited_timing(arguments: dict, message: str) -> None:

@@ -447,12 +447,22 @@ def _under_jerk_limits(
 ) -> tuple[TimingResult, JerkTimingResult, str]:
     """The path found and the first path timed under the jerk limits (stage 2 does not know
     them yet: its path may be the worse one under them); the better, its stage-1 timing, the
-    message."""
+    message. Within what is left of the plan's time limit (past it, each jerk-limited timing
+    stops at its first feasible iterate: the message says so)."""
+    late: list[str] = []
 
     def timed(path: Path) -> JerkTimingResult:
-        return time_with_jerk_limits(
-            setup.robot, path, setup.cost, grid=setup.grid, velocity_limits=setup.velocity_limits
+        result = time_with_jerk_limits(
+            setup.robot,
+            path,
+            setup.cost,
+            grid=setup.grid,
+            velocity_limits=setup.velocity_limits,
+            time_limit=max(setup.deadline - time.perf_counter(), 0.0),
         )
+        if result.timing.timed_out:
+            late.append("; the jerk-limited timing stopped at the plan's time limit")
+        return result
 
     found = timed(timing.trajectory.path)
     note = f"J {timing.J:.6g} -> {found.J:.6g}, te {timing.duration:.4g} -> {found.duration:.4g} s"
@@ -464,9 +474,9 @@ def _under_jerk_limits(
                 first,
                 f"{message}; under the jerk limits the first path costs less (J "
                 f"{first.J:.6g} against {found.J:.6g} for the path found without them): it is "
-                f"returned, timed under them (te {first.duration:.4g} s)",
+                f"returned, timed under them (te {first.duration:.4g} s){''.join(late[:1])}",
             )
-    return timing, found, f"{message}; timed under the jerk limits: {note}"
+    return timing, found, f"{message}; timed under the jerk limits: {note}{''.join(late[:1])}"
 
 
 def _via_points(

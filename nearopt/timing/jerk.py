@@ -61,6 +61,7 @@ from ..errors import ConfigurationError, SolverError
 from ..path import Path
 from ..robot import Robot
 from ..trajectory import InverseDynamics, Motion, MotionCost
+from ..validate import is_number
 from ._banded_kernels import implied_rows
 from .banded import BandedProgram, solve_banded, windows
 from .solvers import TimingMethod
@@ -122,6 +123,9 @@ class JerkTiming:
         The back end of each of those programs: :attr:`TimingMethod.INTERIOR` (the banded
         kernel, :mod:`nearopt.timing.banded`) or :attr:`TimingMethod.SOCP` (Clarabel: asked
         for, or where the kernel did not converge).
+    timed_out
+        Whether the iterations stopped at the time limit (the timing holds every limit, but
+        a further iteration would have lowered J).
     """
 
     s: NDArray[np.float64]
@@ -129,6 +133,7 @@ class JerkTiming:
     m: NDArray[np.float64]
     history: tuple[float, ...]
     solvers: tuple[TimingMethod, ...] = ()
+    timed_out: bool = False
 
     @property
     def iterations(self) -> int:
@@ -221,6 +226,7 @@ def jerk_limited_timing(
     max_iterations: int = 30,
     tolerance: float = 1e-6,
     method: TimingMethod = TimingMethod.INTERIOR,
+    time_limit: float = np.inf,
 ) -> JerkTiming:
     """The C¹ timing of ``path`` that minimises J = ∫ f0 dt (``cost``: time, the default, or
     :class:`~nearopt.TorqueCost`'s 1 + Σ w u²), from rest to rest with θ̈ = 0 at both ends, under
@@ -234,11 +240,17 @@ def jerk_limited_timing(
     (:attr:`TimingMethod.INTERIOR`, Clarabel where it does not converge) or by Clarabel's SOCP
     (:attr:`TimingMethod.SOCP`); :attr:`JerkTiming.solvers` says which solved.
 
+    ``time_limit`` [s]: past it no further iteration starts, and the best iterate so far is
+    returned (:attr:`JerkTiming.timed_out`) — every iterate holds every limit, so it is a
+    valid timing, only a longer (costlier) one. At least one convex program is solved per
+    refinement of the torque rows (at most :data:`REFINEMENTS` + 1), whatever the limit.
+
     Raises
     ------
     ConfigurationError
         Jerk or acceleration limits that are not positive numbers (one, or one per joint), a
-        grid below 4 segments, ``max_iterations`` below 1, another cost or another method.
+        grid below 4 segments, ``max_iterations`` below 1, another cost or another method, a
+        time limit that is not a number ≥ 0.
     SolverError
         If a convex program fails.
     """
@@ -251,6 +263,10 @@ def jerk_limited_timing(
     for name, value, low in (("grid", grid, 4), ("max_iterations", max_iterations, 1)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
             raise ConfigurationError(f"{name} must be an integer ≥ {low}, got {value!r}")
+    if not is_number(time_limit) or not time_limit >= 0.0:
+        raise ConfigurationError(f"time_limit must be a number of seconds ≥ 0, got {time_limit!r}")
+    deadline = time.perf_counter() + float(time_limit)
+    timed_out = False
     if method not in (TimingMethod.INTERIOR, TimingMethod.SOCP):
         raise ConfigurationError(
             f"the jerk-limited timing's method is TimingMethod.INTERIOR or SOCP, got {method!r}"
@@ -281,6 +297,9 @@ def jerk_limited_timing(
                 best = (value, x)
             if len(history) > 1 and history[-2] - value <= tolerance * abs(value):
                 break
+            if time.perf_counter() >= deadline:
+                timed_out = True
+                break
             bbar = np.maximum(x[model.iB], 1e-300)
         assert best is not None
         x = best[1]
@@ -292,7 +311,7 @@ def jerk_limited_timing(
         extra = (np.concatenate([extra[0], more[0]]), np.concatenate([extra[1], more[1]]))
         model = _Model(robot, path, s, jerk, acc, torque, weights, extra)
         x = x[: model.iB[-1] + 1]  # b, m and B keep their places: the roots read them
-    timing = model.timing(x, tuple(history), tuple(solvers))
+    timing = model.timing(x, tuple(history), tuple(solvers), timed_out)
     return _slowed_down(timing, robot, path, acc, jerk)
 
 
@@ -315,7 +334,14 @@ def _slowed_down(
     kappa = min(1.0, keep / max(float(np.max(ratios)), 1e-300))
     if kappa >= 1.0:
         return timing
-    return JerkTiming(timing.s, kappa * timing.b, kappa * timing.m, timing.history, timing.solvers)
+    return JerkTiming(
+        timing.s,
+        kappa * timing.b,
+        kappa * timing.m,
+        timing.history,
+        timing.solvers,
+        timing.timed_out,
+    )
 
 
 _WIDTH = 5
@@ -1080,12 +1106,13 @@ class _Model:
         x: NDArray[np.float64],
         history: tuple[float, ...],
         solvers: tuple[TimingMethod, ...] = (),
+        timed_out: bool = False,
     ) -> JerkTiming:
         b = np.maximum(x[self.ib], 0.0)
         b[0] = b[-1] = 0.0
         m = x[self.im].copy()
         m[[0, -1]] = np.nan
-        return JerkTiming(self.s, b, m, history, solvers)
+        return JerkTiming(self.s, b, m, history, solvers, timed_out)
 
 
 class SmoothTrajectory(Motion):
@@ -1202,12 +1229,15 @@ def time_with_jerk_limits(
     *,
     grid: int = 200,
     velocity_limits: bool = True,
+    time_limit: float = np.inf,
 ) -> JerkTimingResult:
     """The robot's jerk limits (:attr:`~nearopt.robot.JointLimits.jerk`) held on ``path``: its
     :func:`jerk_limited_timing` for ``cost`` under the robot's other limits (its speed limits
-    only with ``velocity_limits``), as a motion."""
+    only with ``velocity_limits``; ``time_limit`` [s] as there), as a motion."""
     start = time.perf_counter()
     limited = robot if velocity_limits else robot.with_limits(velocity=np.inf)
-    timing = jerk_limited_timing(limited, path, robot.limits.jerk, cost, grid=grid)
+    timing = jerk_limited_timing(
+        limited, path, robot.limits.jerk, cost, grid=grid, time_limit=time_limit
+    )
     motion = SmoothTrajectory(path, timing, robot.inverse_dynamics_batch)
     return JerkTimingResult(motion, cost, timing, time.perf_counter() - start)
