@@ -26,30 +26,6 @@ def _dot(coef, start, z):  # pragma: no cover - compiled
 
 
 @inline_jit(fastmath=FAST, error_model="numpy")
-def _rows(z, r_start, r_a, r_e, r_ell, r_h, c, grad, curv):  # pragma: no cover - compiled
-    """Each row's value c_j = a·z + e√(ℓ·z) − h, its gradient (m, W) and the coefficient of
-    ℓℓᵀ in its Hessian (−e/4 (ℓ·z)^{−3/2} ≥ 0 for e ≤ 0)."""
-    m, width = r_a.shape
-    for j in range(m):
-        st = r_start[j]
-        value = _dot(r_a[j], st, z) - r_h[j]
-        e = r_e[j]
-        if e != 0.0:
-            root = _dot(r_ell[j], st, z)
-            sq = np.sqrt(root)
-            value += e * sq
-            half = 0.5 * e / sq
-            for a in range(width):
-                grad[j, a] = r_a[j, a] + half * r_ell[j, a]
-            curv[j] = -0.25 * e / (root * sq)
-        else:
-            for a in range(width):
-                grad[j, a] = r_a[j, a]
-            curv[j] = 0.0
-        c[j] = value
-
-
-@inline_jit(fastmath=FAST, error_model="numpy")
 def _terms(
     z, t_start, t_ell, t_omega, t_c0, t_alpha, t_g, wts, lin, f_scale, gradf, band
 ):  # pragma: no cover - compiled
@@ -97,35 +73,6 @@ def _terms(
 
 
 @inline_jit(fastmath=FAST, error_model="numpy")
-def _newton(r_start, r_ell, s, y, c, grad, curv, gradf, rd, band):  # pragma: no cover - compiled
-    """The rows' share of the Newton matrix (Jᵀ(Y/S)J + Σ y_j ∇²c_j, into ``band``) and of the
-    gradient of the Lagrangian (rd = ∇F + Jᵀy); returns Σ s_j y_j and the largest |c_j + s_j|."""
-    m, width = grad.shape
-    for i in range(rd.size):
-        rd[i] = gradf[i]
-    gap = 0.0
-    rp = 0.0
-    for j in range(m):
-        st = r_start[j]
-        yj = y[j]
-        wj = yj / s[j]
-        hj = yj * curv[j]
-        for a in range(width):
-            ga = grad[j, a]
-            rd[st + a] += yj * ga
-            wa = wj * ga
-            for b in range(a + 1):
-                band[st + a, a - b] += wa * grad[j, b]
-        if hj != 0.0:
-            for a in range(width):
-                for b in range(a + 1):
-                    band[st + a, a - b] += hj * r_ell[j, a] * r_ell[j, b]
-        gap += s[j] * yj
-        rp = max(rp, abs(c[j] + s[j]))
-    return gap, rp
-
-
-@inline_jit(fastmath=FAST, error_model="numpy")
 def _cholesky(band, low):  # pragma: no cover - compiled
     """The banded Cholesky factor L (``low[i, k]`` = L[i, i − k]) of the lower band ``band``;
     False if a pivot is not positive."""
@@ -162,41 +109,106 @@ def _back(low, rhs, out):  # pragma: no cover - compiled
 
 
 @inline_jit(fastmath=FAST, error_model="numpy")
-def _direction(r_start, grad, s, y, c, rd, rc, low, dz, ds, dy, rhs):  # pragma: no cover - compiled
-    """The Newton direction for the residuals rd (dual), c + s (primal) and rc (s∘y − σμ…):
-    (H + Jᵀ(Y/S)J) Δz = −rd − Jᵀ(Y/S)(c + s − rc/y), then Δy and Δs."""
-    m, width = grad.shape
-    n = rd.size
-    for i in range(n):
-        rhs[i] = -rd[i]
+def _newton(
+    z, r_start, r_a, r_e, r_ell, r_h, s, y, c, grad, gradf, rd, band
+):  # pragma: no cover - compiled
+    """One pass over the rows: each row's value c_j = a·z + e√(ℓ·z) − h (and, for a row with
+    a √ term, its gradient into ``grad``: the others' is a), its share of the Newton matrix
+    (Jᵀ(Y/S)J + Σ y_j ∇²c_j, into ``band``: ∇²c_j = −e/4 (ℓ·z)^{−3/2} ℓℓᵀ ≥ 0 for e ≤ 0) and of
+    the gradient of the Lagrangian (rd = ∇F + Jᵀy). Returns Σ s_j y_j and the largest
+    |c_j + s_j|."""
+    m, width = r_a.shape
+    for i in range(rd.size):
+        rd[i] = gradf[i]
+    gap = 0.0
+    rp = 0.0
     for j in range(m):
         st = r_start[j]
-        t = (y[j] * (c[j] + s[j]) - rc[j]) / s[j]
+        value = -r_h[j]
         for a in range(width):
-            rhs[st + a] -= grad[j, a] * t
-    _back(low, rhs, dz)
-    for j in range(m):
-        st = r_start[j]
-        jd = 0.0
+            value += r_a[j, a] * z[st + a]
+        yj = y[j]
+        e = r_e[j]
+        g = r_a
+        hj = 0.0
+        if e != 0.0:
+            root = _dot(r_ell[j], st, z)
+            sq = np.sqrt(root)
+            value += e * sq
+            half = 0.5 * e / sq
+            for a in range(width):
+                grad[j, a] = r_a[j, a] + half * r_ell[j, a]
+            g = grad
+            hj = -0.25 * e * yj / (root * sq)
+        c[j] = value
+        wj = yj / s[j]
         for a in range(width):
-            jd += grad[j, a] * dz[st + a]
-        # Δs = −(c + s) − JΔz;  S Δy + Y Δs = −rc
-        ds[j] = -(c[j] + s[j]) - jd
-        dy[j] = (-rc[j] - y[j] * ds[j]) / s[j]
+            ga = g[j, a]
+            rd[st + a] += yj * ga
+            wa = wj * ga
+            for b in range(a + 1):
+                band[st + a, a - b] += wa * g[j, b]
+        if hj != 0.0:
+            for a in range(width):
+                for b in range(a + 1):
+                    band[st + a, a - b] += hj * r_ell[j, a] * r_ell[j, b]
+        gap += s[j] * yj
+        rp = max(rp, abs(value + s[j]))
+    return gap, rp
 
 
 @inline_jit(fastmath=FAST, error_model="numpy")
-def _longest(
-    s, y, ds, dy, z, dz, r_start, r_e, r_ell, t_start, t_ell, has_roots
+def _rhs(r_start, r_a, r_e, grad, s, y, c, ds, dy, target, rd, rhs):  # pragma: no cover
+    """The right-hand side −rd − Jᵀ(Y/S)(c + s − rc/y) of the Newton system for the
+    complementarity target rc = s∘y + Δs∘Δy − target (Δs = Δy = 0: the predictor's)."""
+    m, width = r_a.shape
+    for i in range(rd.size):
+        rhs[i] = -rd[i]
+    for j in range(m):
+        st = r_start[j]
+        # y(c + s) − rc = y c − Δs Δy + target
+        t = (y[j] * c[j] - ds[j] * dy[j] + target) / s[j]
+        g = grad if r_e[j] != 0.0 else r_a
+        for a in range(width):
+            rhs[st + a] -= g[j, a] * t
+    return 0
+
+
+@inline_jit(fastmath=FAST, error_model="numpy")
+def _steps(
+    r_start, r_a, r_e, grad, s, y, c, dz, ds_old, dy_old, target, ds, dy
 ):  # pragma: no cover - compiled
-    """The longest step ≤ 1 that keeps s, y > 0 (STEP_TO_BOUNDARY of the way) and every root
-    ℓ·z above a quarter of its value."""
+    """Δs = −(c + s) − JΔz and Δy = (−rc − yΔs)/s (rc as in :func:`_rhs`), into ``ds``, ``dy``;
+    returns the longest step ≤ 1 that keeps s, y > 0 (STEP_TO_BOUNDARY of the way) and the
+    sums Σ (sΔy + yΔs), Σ ΔsΔy (the duality measure after a step α: Σ s y + α·first + α²·second)."""
+    m, width = r_a.shape
     step = 1.0
-    for j in range(s.size):
-        if ds[j] < 0.0:
-            step = min(step, -STEP_TO_BOUNDARY * s[j] / ds[j])
-        if dy[j] < 0.0:
-            step = min(step, -STEP_TO_BOUNDARY * y[j] / dy[j])
+    first = 0.0
+    second = 0.0
+    for j in range(m):
+        st = r_start[j]
+        g = grad if r_e[j] != 0.0 else r_a
+        jd = 0.0
+        for a in range(width):
+            jd += g[j, a] * dz[st + a]
+        sj, yj = s[j], y[j]
+        dsj = -(c[j] + sj) - jd
+        dyj = (-(sj * yj + ds_old[j] * dy_old[j] - target) - yj * dsj) / sj
+        ds[j] = dsj
+        dy[j] = dyj
+        if dsj < 0.0:
+            step = min(step, -STEP_TO_BOUNDARY * sj / dsj)
+        if dyj < 0.0:
+            step = min(step, -STEP_TO_BOUNDARY * yj / dyj)
+        first += sj * dyj + yj * dsj
+        second += dsj * dyj
+    return step, first, second
+
+
+@inline_jit(fastmath=FAST, error_model="numpy")
+def _roots_step(step, z, dz, r_start, r_e, r_ell, t_start, t_ell, has_roots):  # pragma: no cover
+    """``step`` shortened so that no ℓ·z of a term (or of a row's √ term) falls below a quarter
+    of its value."""
     for p in range(t_start.size):
         v = _dot(t_ell[p], t_start[p], z)
         dv = _dot(t_ell[p], t_start[p], dz)
@@ -235,13 +247,16 @@ def iterate(
 ):  # pragma: no cover - compiled
     """Mehrotra's predictor-corrector on (z, s, y) in place, one step length for all three.
 
+    Six passes over the rows per iteration: the Newton matrix and the residuals; the
+    predictor's right-hand side, then its Δs, Δy and step; the corrector's right-hand side,
+    then its Δs, Δy and step; the update.
+
     Returns (status, iterations taken, F(z) unscaled, and the last duality measure Σ s y,
     largest |∇L| (scaled) and largest |c + s|)."""
     n = z.size
     m, width = r_a.shape
     c = np.zeros(m)
     grad = np.zeros((m, width))
-    curv = np.zeros(m)
     gradf = np.zeros(n)
     band = np.zeros((n, width))
     low = np.zeros((n, width))
@@ -250,10 +265,8 @@ def iterate(
     dz = np.zeros(n)
     ds = np.zeros(m)
     dy = np.zeros(m)
-    dz2 = np.zeros(n)
     ds2 = np.zeros(m)
     dy2 = np.zeros(m)
-    rc = np.zeros(m)
     f = 0.0
     gap = rd_max = rp = np.inf
     has_roots = False
@@ -262,8 +275,7 @@ def iterate(
     for it in range(iterations):
         band[:, :] = 0.0
         f = _terms(z, t_start, t_ell, t_omega, t_c0, t_alpha, t_g, wts, lin, f_scale, gradf, band)
-        _rows(z, r_start, r_a, r_e, r_ell, r_h, c, grad, curv)
-        gap, rp = _newton(r_start, r_ell, s, y, c, grad, curv, gradf, rd, band)
+        gap, rp = _newton(z, r_start, r_a, r_e, r_ell, r_h, s, y, c, grad, gradf, rd, band)
         rd_max = 0.0
         for i in range(n):
             rd_max = max(rd_max, abs(rd[i]))
@@ -276,23 +288,23 @@ def iterate(
             return SINGULAR, it, f, gap, rd_max, rp
         mu = gap / m
         # predictor: rc = s∘y
-        for j in range(m):
-            rc[j] = s[j] * y[j]
-        _direction(r_start, grad, s, y, c, rd, rc, low, dz, ds, dy, rhs)
-        step = _longest(s, y, ds, dy, z, dz, r_start, r_e, r_ell, t_start, t_ell, has_roots)
-        after = 0.0
-        for j in range(m):
-            after += (s[j] + step * ds[j]) * (y[j] + step * dy[j])
+        ds[:] = 0.0
+        dy[:] = 0.0
+        _rhs(r_start, r_a, r_e, grad, s, y, c, ds, dy, 0.0, rd, rhs)
+        _back(low, rhs, dz)
+        step, first, second = _steps(r_start, r_a, r_e, grad, s, y, c, dz, ds, dy, 0.0, ds, dy)
+        step = _roots_step(step, z, dz, r_start, r_e, r_ell, t_start, t_ell, has_roots)
+        after = gap + step * first + step * step * second
         # the centring target σμ (Mehrotra), kept above a share of the dual residual so that
         # the complementarity does not reach 0 before the gradient of the Lagrangian
-        target = max((after / gap) ** 3 * mu, min(0.1 * mu, FLOOR * rd_max))
+        target = max((max(after, 0.0) / gap) ** 3 * mu, min(0.1 * mu, FLOOR * rd_max))
         # corrector: rc = s∘y + Δs∘Δy − σμ
-        for j in range(m):
-            rc[j] = s[j] * y[j] + ds[j] * dy[j] - target
-        _direction(r_start, grad, s, y, c, rd, rc, low, dz2, ds2, dy2, rhs)
-        step = _longest(s, y, ds2, dy2, z, dz2, r_start, r_e, r_ell, t_start, t_ell, has_roots)
+        _rhs(r_start, r_a, r_e, grad, s, y, c, ds, dy, target, rd, rhs)
+        _back(low, rhs, dz)
+        step = _steps(r_start, r_a, r_e, grad, s, y, c, dz, ds, dy, target, ds2, dy2)[0]
+        step = _roots_step(step, z, dz, r_start, r_e, r_ell, t_start, t_ell, has_roots)
         for i in range(n):
-            z[i] += step * dz2[i]
+            z[i] += step * dz[i]
             if not np.isfinite(z[i]):
                 return NOT_FINITE, it + 1, f, gap, rd_max, rp
         for j in range(m):
