@@ -847,16 +847,20 @@ class _Model:
         model's quadrature, a majorant of it where the damping enters). ``method``: the banded
         interior-point kernel (:mod:`nearopt.timing.banded`; Clarabel where it does not
         converge) or Clarabel's SOCP."""
-        per_iteration = self._jerk_rows(bbar)
-        if self.tq is not None and self.damped:
-            self._torque_rows(per_iteration, self.roots(self.tq, previous, bbar))
+        torque = _Rows()  # a damped arm's torque rows, at the last b
+        roots = None if self.tq is None or not self.damped else self.roots(self.tq, previous, bbar)
+        if roots is not None:
+            self._torque_rows(torque, roots)
         objective, offset = self._objective(bbar, previous)
         if method is TimingMethod.INTERIOR:
-            answer = self._solve_banded(bbar, previous, per_iteration, objective)
+            answer = self._solve_banded(bbar, previous, torque, objective)
             if answer is not None:
                 self.solver = TimingMethod.INTERIOR
                 return answer[0], answer[1] + offset
         self.solver = TimingMethod.SOCP
+        per_iteration = self._jerk_rows(bbar)
+        if roots is not None:
+            self._torque_rows(per_iteration, roots)
         x, value = self._solve_conic(bbar, per_iteration, objective)
         return x, value + offset
 
@@ -1036,11 +1040,39 @@ class _Model:
         self._terms += (np.concatenate(g), weights)
         return self._terms
 
+    def _window_jerk_rows(
+        self, bbar: NDArray[np.float64], unit: float
+    ) -> tuple[NDArray[np.int64], NDArray, NDArray, NDArray, NDArray]:
+        """:meth:`_jerk_rows` over z (x = T·unit·z) in window form, each scaled so that its
+        largest coefficient is 1 (none implies another: each joint's rows bound a second
+        difference of b of its own sign). Their coefficients on b and m are the same for every
+        B̄: their windows are built once and B_k's coefficient and the bound set per B̄."""
+        if getattr(self, "_jerk_windows", None) is None:
+            rows = _Rows()
+            joint = []
+            for j, coef in self.jerk_rows:
+                rows.add(np.repeat(self.cols3, 5, axis=0), coef, 0.0)
+                joint.append(np.full(coef.shape[0], j))
+            a, _ = rows.matrix(self.nv)
+            seg = np.tile(np.repeat(self.inner, 5), len(self.jerk_rows))
+            zb = 2 * (seg - 1) + 1  # B_k's column in z
+            start = np.clip(zb - 3, 0, 2 * self.inner.size - _WIDTH)
+            _, (coef,) = windows([(a @ self.reduction()).tocsr()], _WIDTH, start=start)
+            self._jerk_windows = (start, coef, zb - start, seg, np.concatenate(joint))
+        start, coef, offset, seg, joint = self._jerk_windows
+        bb, jerk = bbar[seg], self.jerk[joint]
+        a = coef.copy()
+        a[np.arange(a.shape[0]), offset] = 0.5 * jerk * bb**-1.5
+        scale = np.max(np.abs(a), axis=1)
+        h = (1.0 - MARGIN) * 1.5 * jerk / np.sqrt(bb) / (unit * scale)
+        zero = np.zeros(h.size)
+        return start, a / scale[:, None], zero, np.zeros_like(a), h
+
     def _solve_banded(
         self,
         bbar: NDArray[np.float64],
         previous: NDArray[np.float64] | None,
-        per_iteration: _Rows,
+        torque: _Rows,
         objective: NDArray[np.float64],
     ) -> tuple[NDArray[np.float64], float] | None:
         """The restriction by the banded interior-point kernel, in z (:meth:`reduction`): the
@@ -1050,10 +1082,11 @@ class _Model:
         unit = float(np.max(bbar[self.inner]))  # z in units where b is about 1
         if getattr(self, "_fixed_rows", None) is None:  # the same for every B̄ but h ∝ 1/unit
             self._fixed_rows = self._window_rows(self.fixed, 1.0, prune=True)
-        fixed = self._fixed_rows
-        now = self._window_rows(per_iteration, unit, prune=False)  # (jerk rows: none implied)
-        rows = [np.concatenate([f, c]) for f, c in zip(fixed[:4], now[:4], strict=True)]
-        h = np.concatenate([fixed[4] / unit, now[4]])
+        parts = [self._fixed_rows, self._window_jerk_rows(bbar, unit)]
+        if torque.count:
+            parts.append(self._window_rows(torque, unit, prune=False))
+        rows = [np.concatenate([part[k] for part in parts]) for k in range(4)]
+        h = np.concatenate([parts[0][4] / unit, *(part[4] for part in parts[1:])])
         start, ell, omega, c0, alpha, g, weights = self._window_terms()
         lin = objective.copy()
         lin[self.it.ravel()] = 0.0  # in the terms
