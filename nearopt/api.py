@@ -66,7 +66,7 @@ __all__ = [
     "MAX_RATE",
 ]
 
-OUTPUT_OPTIONS = ("json", "csv", "html", "plots", "show")
+OUTPUT_OPTIONS = ("json", "csv", "html", "plots", "show", "ros_yaml", "ros_bag", "ros_points")
 """Options of ``nearopt plan`` that write or show the plan: the caller's, not the request's."""
 FILE_FIELDS = ("urdf", "srdf", "scene", "task", "joint_limits")
 """The fields that name files (read when the request is prepared)."""

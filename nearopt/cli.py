@@ -45,6 +45,14 @@ from .outputs import (
 )
 from .path import StraightPath
 from .planning import METHODS, Iteration, PlanResult, StopReason, TaskResult
+from .ros import (
+    BagContents,
+    bag_files,
+    check_bag_folder,
+    goal_yaml,
+    joint_trajectory,
+    replace_folder,
+)
 from .validate import check_rate
 from .verify import VerificationError
 
@@ -313,6 +321,23 @@ def _output_options(p: argparse.ArgumentParser) -> None:
     )
     p.add_argument("--html", metavar="FILE", help="write the animation as a standalone HTML file")
     p.add_argument(
+        "--ros-yaml",
+        metavar="FILE",
+        help="write the control_msgs/action/FollowJointTrajectory goal as YAML (- likewise)",
+    )
+    p.add_argument(
+        "--ros-bag",
+        metavar="DIR",
+        help="write a rosbag2 (MCAP): /joint_trajectory, /joint_states and /tf at --rate",
+    )
+    p.add_argument(
+        "--ros-points",
+        choices=("knots", "rate"),
+        default="knots",
+        help="the JointTrajectory's points: at the motion's knots, refined until the "
+        "controller's quintic interpolation is within 1e-6 of it (default), or at --rate",
+    )
+    p.add_argument(
         "--verify",
         action="store_true",
         help="print the verification report (every plan is verified before output)",
@@ -412,8 +437,8 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     with interrupt.armed():
         result = solve(prepared, None if quiet else progress, None if quiet else segment_progress)
     _print_summary(result, out)
-    if args.json or args.csv:  # a record too long for its rate is refused before the check
-        check_record(result, args.rate)
+    if args.json or args.csv or args.ros_bag or (args.ros_yaml and args.ros_points == "rate"):
+        check_record(result, args.rate)  # a record too long for its rate: before the check
     report = check(result, prepared)
     if args.verify:
         print(report, file=out)
@@ -427,9 +452,11 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
 def _check_output_places(args: argparse.Namespace) -> tuple[dict[str, Output], Path | None]:
     """Every output place, checked before planning (a bad path costs no planning time); the
     figures' folder."""
-    for key in ("json", "csv", "html", "plots"):  # an unset variable in a script: say so
+    for key in ("json", "csv", "html", "plots", "ros_yaml", "ros_bag"):  # an unset variable
         if getattr(args, key) == "":
-            raise ConfigurationError(f"--{key} is an empty path")
+            raise ConfigurationError(f"--{key.replace('_', '-')} is an empty path")
+    if args.ros_bag:
+        check_bag_folder(args.ros_bag)
     if args.plots:
         try:
             import matplotlib  # noqa: F401
@@ -438,7 +465,9 @@ def _check_output_places(args: argparse.Namespace) -> tuple[dict[str, Output], P
                 "--plots needs matplotlib: pip install 'nearopt[viz]'"
             ) from None
     roles = {
-        f"--{key}": getattr(args, key) for key in ("json", "csv", "html") if getattr(args, key)
+        f"--{key.replace('_', '-')}": getattr(args, key)
+        for key in ("json", "csv", "html", "ros_yaml")
+        if getattr(args, key)
     }
     plots = _plots_folder(args.plots) if args.plots else None
     if plots is not None and plots.is_dir():
@@ -513,6 +542,7 @@ def _write(
             contents[outputs["--json"]] = json_text(result, args.rate)
         if args.csv:
             contents[outputs["--csv"]] = csv_text(result, args.rate)
+        bag = _ros_outputs(result, args, outputs, contents)
     if args.html:
         from .viz.viewer import plan_html
 
@@ -531,8 +561,29 @@ def _write(
     interrupt.abort_if_second()
     for name in write_outputs(contents):
         print(f"wrote {name}", file=out)
+    if bag is not None:
+        replace_folder(Path(args.ros_bag), bag.files)
+        print(f"wrote {args.ros_bag} (rosbag2, MCAP: {', '.join(bag.messages)})", file=out)
     for message in dict.fromkeys(str(w.message) for w in caught):  # after success only
         print(f"nearopt: warning: {message}", file=sys.stderr)
+
+
+def _ros_outputs(
+    result: PlanResult | TaskResult,
+    args: argparse.Namespace,
+    outputs: dict[str, Output],
+    contents: dict[Output, str | bytes],
+) -> BagContents | None:
+    """--ros-yaml into ``contents``; the --ros-bag folder's files (written after the others)."""
+    if not (args.ros_yaml or args.ros_bag):
+        return None
+    trajectory = joint_trajectory(result, args.rate if args.ros_points == "rate" else None)
+    if args.ros_yaml:
+        contents[outputs["--ros-yaml"]] = goal_yaml(trajectory)
+    if not args.ros_bag:
+        return None
+    name = Path(args.ros_bag).resolve().name
+    return bag_files(result, name, args.rate, trajectory=trajectory)
 
 
 def _show(result: PlanResult | TaskResult, out: TextIO) -> None:
