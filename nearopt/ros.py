@@ -32,7 +32,7 @@ from .errors import ConfigurationError
 from .export import check_record, check_sampling
 from .outputs import write_atomically
 from .planning import Plan
-from .validate import check_rate
+from .validate import check_rate, is_number
 
 __all__ = [
     "JointTrajectory",
@@ -121,7 +121,7 @@ def joint_trajectory(
         samples = motion.sample(check_rate(rate))
         t, q, qd, qdd, u = samples.t, samples.q, samples.qd, samples.qdd, samples.tau
     else:
-        if not (isinstance(tolerance, int | float) and np.isfinite(tolerance) and tolerance > 0):
+        if not (is_number(tolerance) and np.isfinite(tolerance) and tolerance > 0):
             raise ConfigurationError(f"tolerance must be a positive number, got {tolerance!r}")
         t = _refined(motion, tolerance)
         q, qd, qdd = motion.states(t)
