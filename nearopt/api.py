@@ -123,6 +123,10 @@ class PlanRequest:
         a scene).
     rate
         The rate [Hz] of the samples that are verified and written.
+    joint_order
+        The order of the joint vectors given (q0, qe, via and the per-joint limits and weights):
+        every joint of the arm by name once, e.g. a controller's order; default the URDF's.
+        Outputs keep the URDF's order and name the joints.
     """
 
     robot: str | None = None
@@ -161,6 +165,7 @@ class PlanRequest:
     margin: float | None = None
     self_collision: bool | None = None
     rate: float = 1000.0
+    joint_order: tuple[str, ...] = ()
 
     def __post_init__(self) -> None:
         """A file given as a ``Path`` is kept as its text, arrays as (nested) tuples of their
@@ -375,6 +380,7 @@ _KINDS: dict[str, _Kind] = {
     "srdf": _Kind.TEXT,
     "group": _Kind.TEXT,
     "lock_at": _Kind.TEXTS,
+    "joint_order": _Kind.TEXTS,
     "effort_limit": _Kind.NUMBERS,
     "velocity_limit": _Kind.NUMBERS,
     "velocity_scale": _Kind.NUMBER,
@@ -589,7 +595,9 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
             f"{type(request).__name__} {request!r:.60}"
         )
     request.check()
-    robot = _robot(request, robot_loader)
+    loaded = _load_robot(request, robot_loader)
+    request = _in_urdf_order(request, loaded)
+    robot = _with_limits(loaded, request)
     if request.weights is not None and len(request.weights) != robot.n:
         raise ConfigurationError(
             f"--weights needs one weight per joint of {robot.name} ({robot.n}), "
@@ -739,8 +747,58 @@ def _lock_values(pairs: tuple[str, ...]) -> dict[str, float]:
     return values
 
 
-def _robot(request: PlanRequest, loader: RobotLoader | None = None) -> Robot:
-    """The arm, with the limits the request overrides."""
+PER_JOINT = (
+    "q0",
+    "qe",
+    "weights",
+    "effort_limit",
+    "velocity_limit",
+    "acceleration_limit",
+    "jerk_limit",
+)
+"""The request's fields that hold one value per joint (and ``via``, several such vectors)."""
+
+
+def _in_urdf_order(request: PlanRequest, robot: Robot) -> PlanRequest:
+    """The request with every joint vector in the URDF's order (``joint_order`` then empty).
+
+    Raises
+    ------
+    ConfigurationError
+        A ``joint_order`` that does not name every joint of the arm exactly once.
+    """
+    order = request.joint_order
+    if not order:
+        return request
+    names = list(robot.joint_names)
+    unknown = [name for name in order if name not in names]
+    twice = sorted({name for name in order if order.count(name) > 1})
+    missing = [name for name in names if name not in order]
+    if unknown or twice or missing:
+        said = [
+            f"{label}: {', '.join(items)}"
+            for label, items in (("unknown", unknown), ("twice", twice), ("missing", missing))
+            if items
+        ]
+        raise ConfigurationError(
+            f"--joint-order must name every joint of {robot.name} once ({', '.join(names)}); "
+            + "; ".join(said)
+        )
+    index = [order.index(name) for name in names]
+
+    def mapped(values: tuple[float, ...] | None) -> tuple[float, ...] | None:
+        if values is None or len(values) != len(names):
+            return values  # (one value for every joint, or a count the checks will name)
+        return tuple(values[k] for k in index)
+
+    changes = {field: mapped(getattr(request, field)) for field in PER_JOINT}
+    changes["via"] = tuple(mapped(v) for v in request.via)
+    return replace(request, **changes, joint_order=())
+
+
+def _load_robot(request: PlanRequest, loader: RobotLoader | None = None) -> Robot:
+    """The arm the request names (its URDF's limits; a single ``--effort-limit`` of a URDF
+    applied as the URDF is read)."""
     limit = request.effort_limit
     single_effort = limit[0] if limit and len(limit) == 1 else None
 
@@ -771,7 +829,11 @@ def _robot(request: PlanRequest, loader: RobotLoader | None = None) -> Robot:
         request.lock_at,
         None if request.robot else single_effort,
     )
-    robot = load() if loader is None else loader(key, load)
+    return load() if loader is None else loader(key, load)
+
+
+def _with_limits(robot: Robot, request: PlanRequest) -> Robot:
+    """The arm with the limits the request overrides (its vectors in the URDF's order)."""
     if request.joint_limits is not None:
         robot = robot.with_joint_limits(request.joint_limits)
     overrides: dict[str, Any] = {}

@@ -160,6 +160,14 @@ def _arm_options(p: argparse.ArgumentParser) -> None:
         help="values [rad or m] at which locked joints are held (default 0 within their limits)",
     )
     p.add_argument(
+        "--joint-order",
+        nargs="+",
+        default=[],
+        metavar="JOINT",
+        help="the order of the joint values given (--q0, --qe, --via, per-joint limits and "
+        "weights), e.g. a controller's: every joint by name (default the URDF's)",
+    )
+    p.add_argument(
         "--effort-limit",
         nargs="+",
         type=float,

@@ -242,3 +242,48 @@ def test_the_command_line_writes_the_goal_and_the_bag(tmp_path: Path) -> None:
     )
     assert not (tmp_path / "g2.yaml").exists()
     assert [p.name for p in (tmp_path / "other").iterdir()] == ["notes.txt"]
+
+
+def test_joint_vectors_in_a_controllers_order() -> None:
+    """``joint_order`` (``--joint-order``): q0, qe, via-points and per-joint limits and weights
+    given in another order reach the planner in the URDF's; the same plan as the request in
+    the URDF's order; a bad order names what is unknown, repeated or missing."""
+    from nearopt.api import PlanRequest, prepare
+
+    names = list(nearopt.Robot.from_name("ur5").joint_names)
+    order = names[::-1]
+    q0, qe = [0.0, -1.5, 1.5, 0.0, 0.0, 0.0], [1.0, -1.0, 1.0, 0.5, 0.5, 0.3]
+    via = [0.5, -1.2, 1.2, 0.2, 0.2, 0.1]
+    speed = [3.0, 3.1, 3.2, 3.3, 3.4, 3.5]
+    urdf = PlanRequest(
+        robot="ur5", q0=tuple(q0), qe=tuple(qe), via=(tuple(via),), velocity_limit=tuple(speed),
+        weights=tuple(range(1, 7)), stage1_only=True,
+    )  # fmt: skip
+    theirs = PlanRequest.from_mapping(
+        {
+            "robot": "ur5",
+            "joint_order": order,
+            "q0": q0[::-1],
+            "qe": qe[::-1],
+            "via": [via[::-1]],
+            "velocity_limit": speed[::-1],
+            "weights": list(range(1, 7))[::-1],
+            "stage1_only": True,
+        }
+    )
+    a, b = prepare(urdf), prepare(theirs)
+    np.testing.assert_array_equal(a.q0, b.q0)
+    np.testing.assert_array_equal(a.qe, b.qe)
+    np.testing.assert_array_equal(a.via[0], b.via[0])
+    np.testing.assert_array_equal(a.robot.limits.velocity, b.robot.limits.velocity)
+    np.testing.assert_array_equal(b.robot.limits.velocity, speed)
+    np.testing.assert_array_equal(a.cost.torque_weights(6), b.cost.torque_weights(6))
+    np.testing.assert_array_equal(b.cost.torque_weights(6), np.arange(1.0, 7.0))
+    assert b.request.joint_order == ()  # prepared: in the URDF's order
+    for bad, said in (
+        ([*names[:-1], "nope"], "unknown: nope; missing: wrist_3_joint"),
+        ([*names[:-1], names[0]], f"twice: {names[0]}; missing: wrist_3_joint"),
+        (names[:-1], "missing: wrist_3_joint"),
+    ):
+        with pytest.raises(nearopt.ConfigurationError, match=said):
+            prepare(PlanRequest(robot="ur5", q0=tuple(q0), qe=tuple(qe), joint_order=tuple(bad)))
