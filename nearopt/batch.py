@@ -33,6 +33,7 @@ import json
 import multiprocessing
 import os
 import re
+import shutil
 import socket
 import struct
 import sys
@@ -48,6 +49,7 @@ from typing import TYPE_CHECKING, Any
 from .api import FILE_FIELDS, PlanRequest, run
 from .errors import ConfigurationError, NearoptError, SamplingWarning
 from .outputs import make_folder, resolve_output, write_atomically, write_outputs
+from .ros import BagContents, replace_folder
 from .validate import check_rate
 
 if TYPE_CHECKING:
@@ -223,6 +225,8 @@ class MotionOutcome:
     result
         The plan itself (:class:`~nearopt.PlanResult` or :class:`~nearopt.TaskResult`) when it
         was asked for (:func:`plan_many`) and planned.
+    bag
+        Its rosbag2's files when they were asked for (``DIR/bags/<id>/``) and it was planned.
     """
 
     id: str
@@ -236,6 +240,7 @@ class MotionOutcome:
     warnings: tuple[str, ...] = ()
     document: str = field(default="", repr=False)
     result: PlanResult | TaskResult | None = field(default=None, repr=False)
+    bag: BagContents | None = field(default=None, repr=False)
 
     def row(self) -> dict[str, str]:
         """Its line of ``summary.csv``."""
@@ -256,9 +261,11 @@ class MotionOutcome:
 
 
 def plan_request(
-    request: MotionRequest, rate: float = 1000.0, keep_result: bool = False
+    request: MotionRequest, rate: float = 1000.0, keep_result: bool = False, ros_bag: bool = False
 ) -> MotionOutcome:
-    """Plan, verify and write out one motion as ``nearopt plan`` would (in this process).
+    """Plan, verify and write out one motion as ``nearopt plan`` would (in this process); with
+    ``ros_bag`` its rosbag2 too (:func:`nearopt.ros.bag_files`, stamped from the time it was
+    planned, named after the motion).
 
     Every error a motion can cause (a bad option, an infeasible request, a failed verification)
     is its outcome's ``error``, not an exception.
@@ -288,6 +295,11 @@ def plan_request(
                     },
                 },
             )
+            bag = None
+            if ros_bag:
+                from .ros import bag_files
+
+                bag = bag_files(result, request.id, outcome.prepared.request.rate)
     except (NearoptError, OSError, ArithmeticError, LookupError, TypeError, ValueError) as exc:
         # a nearopt error says what is wrong; anything else is a defect of nearopt's, recorded
         # against its motion (the batch goes on) rather than ending the batch with a traceback
@@ -317,6 +329,7 @@ def plan_request(
         warnings=tuple(notes),
         document=text,
         result=result if keep_result else None,
+        bag=bag,
     )
 
 
@@ -347,7 +360,11 @@ class Pool:
     workers: int
 
     def run(
-        self, requests: Sequence[MotionRequest], rate: float, keep_result: bool
+        self,
+        requests: Sequence[MotionRequest],
+        rate: float,
+        keep_result: bool,
+        ros_bag: bool = False,
     ) -> Iterator[MotionOutcome]:  # pragma: no cover - interface
         """Plan every request; yield the outcomes in the order they finish."""
         raise NotImplementedError
@@ -450,14 +467,20 @@ class LocalPool(Pool):
         return [] if executor is None else list(executor._processes)  # noqa: SLF001
 
     def run(
-        self, requests: Sequence[MotionRequest], rate: float, keep_result: bool
+        self,
+        requests: Sequence[MotionRequest],
+        rate: float,
+        keep_result: bool,
+        ros_bag: bool = False,
     ) -> Iterator[MotionOutcome]:
         attempts = dict.fromkeys((r.id for r in requests), 0)
         order = {r.id: k for k, r in enumerate(requests)}
         pending = list(requests)
         while pending:
             executor = self._start()
-            futures = {executor.submit(plan_request, r, rate, keep_result): r for r in pending}
+            futures = {
+                executor.submit(plan_request, r, rate, keep_result, ros_bag): r for r in pending
+            }
             for r in pending:
                 attempts[r.id] += 1
             pending = []
@@ -629,7 +652,11 @@ class DaskPool(Pool):
         )
 
     def run(
-        self, requests: Sequence[MotionRequest], rate: float, keep_result: bool
+        self,
+        requests: Sequence[MotionRequest],
+        rate: float,
+        keep_result: bool,
+        ros_bag: bool = False,
     ) -> Iterator[MotionOutcome]:
         distributed = self._distributed
         futures = {
@@ -638,6 +665,7 @@ class DaskPool(Pool):
                 r,
                 rate,
                 keep_result,
+                ros_bag,
                 pure=False,
                 key=f"nearopt-{r.id}-{time.time_ns()}",
             ): r
@@ -817,6 +845,7 @@ def run_batch(
     rate: float = 1000.0,
     retry_failed: bool = False,
     progress: Callable[[int, int, int, int, float], None] | None = None,
+    ros_bag: bool = False,
 ) -> BatchSummary:
     """Plan every motion not already done and write its file; keep ``summary.csv`` current.
 
@@ -832,6 +861,10 @@ def run_batch(
         Plan again the motions an earlier run recorded as failed (default: skip them too).
     progress
         Called as results arrive with (done, failed, running, total, ETA [s]).
+    ros_bag
+        Also write each motion planned in this run as a rosbag2 ``DIR/bags/<id>/``
+        (:func:`nearopt.ros.write_ros_bag`; before its JSON, so that a motion whose JSON is
+        written has its bag; a motion skipped as done gets none).
     """
     t0 = time.perf_counter()
     check_rate(rate)
@@ -843,7 +876,7 @@ def run_batch(
     try:
         return _run_batch(
             requests, out, client if cluster is None else cluster, workers, rate, retry_failed,
-            progress, t0,
+            progress, t0, ros_bag,
         )  # fmt: skip
     finally:
         if cluster is not None:
@@ -859,6 +892,7 @@ def _run_batch(
     retry_failed: bool,
     progress: Callable[[int, int, int, int, float], None] | None,
     t0: float,
+    ros_bag: bool = False,
 ) -> BatchSummary:
     """:func:`run_batch` once the pool is known (``client``: None or a :class:`Pool`)."""
     folder = make_folder(out, "the motions")
@@ -878,10 +912,15 @@ def _run_batch(
         aborted = True
         try:
             finished = 0
-            for outcome in pool.run(todo, rate, keep_result=False):
+            for outcome in pool.run(todo, rate, keep_result=False, ros_bag=ros_bag):
                 planned = outcome.status == OutcomeStatus.PLANNED
                 name = _file(folder, outcome.id, planned)
                 _file(folder, outcome.id, not planned).unlink(missing_ok=True)  # stale
+                bag = folder / "bags" / outcome.id
+                if outcome.bag is not None:  # first: a motion whose JSON is there has its bag
+                    replace_folder(bag, outcome.bag.files)
+                elif not planned and (bag / "metadata.yaml").is_file():  # stale
+                    shutil.rmtree(bag)
                 outcomes[outcome.id] = _light(outcome)
                 # the motion's file and the summary that lists it: both or neither (Ctrl-C)
                 if not planned:
@@ -912,7 +951,7 @@ def _run_batch(
 
 def _light(outcome: MotionOutcome) -> MotionOutcome:
     """The outcome without its document and plan (kept for the summary)."""
-    return replace(outcome, document="", result=None)
+    return replace(outcome, document="", result=None, bag=None)
 
 
 def _refuse_inputs(folder: Path, requests: list[MotionRequest]) -> None:

@@ -391,6 +391,12 @@ def _batch_parser(sub: argparse._SubParsersAction) -> None:  # noqa: SLF001 - ar
         "--rate", type=float, default=1000.0, help="the JSON files' sampling rate [Hz] (1000)"
     )
     b.add_argument(
+        "--ros-bag",
+        action="store_true",
+        help="also write DIR/bags/<id>/ per motion planned: a rosbag2 (MCAP) as nearopt plan "
+        "--ros-bag writes",
+    )
+    b.add_argument(
         "--retry-failed",
         action="store_true",
         help="plan again the motions an earlier run recorded as failed",
@@ -632,6 +638,7 @@ def _batch_command(args: argparse.Namespace) -> int:
         rate=args.rate,
         retry_failed=args.retry_failed,
         progress=None if args.quiet else progress_line(),
+        ros_bag=args.ros_bag,
     )
     planned = len(summary.outcomes) - summary.failed
     print(

@@ -287,3 +287,35 @@ def test_joint_vectors_in_a_controllers_order() -> None:
     ):
         with pytest.raises(nearopt.ConfigurationError, match=said):
             prepare(PlanRequest(robot="ur5", q0=tuple(q0), qe=tuple(qe), joint_order=tuple(bad)))
+
+
+def test_a_batch_writes_a_bag_per_motion_planned(tmp_path: Path) -> None:
+    """``nearopt batch … --ros-bag``: ``DIR/bags/<id>/`` for each planned motion, its
+    joint states the JSON's samples; none for a motion that failed."""
+    from test_batch import batch, write_motions
+
+    motions = [
+        {"id": "line", "robot": "two_link", "q0": [0, 0], "qe": [1, 0.5], "stage1_only": True},
+        {"id": "away", "robot": "two_link", "q0": [0, 0], "qe": [99, 0], "stage1_only": True},
+    ]
+    tasks = write_motions(tmp_path, motions)
+    done = batch(str(tasks), "--out", str(tmp_path / "out"), "--workers", "1", "--ros-bag")
+    assert done.returncode == 1, done.stderr  # one failed
+    out = tmp_path / "out"
+    assert (out / "bags" / "line" / "metadata.yaml").is_file() and not (
+        out / "bags" / "away"
+    ).exists()
+    record = json.loads((out / "line.json").read_text())
+    with AnyReader(
+        [out / "bags" / "line"], default_typestore=get_typestore(Stores.ROS2_HUMBLE)
+    ) as r:
+        states = [
+            r.deserialize(raw, c.msgtype).position
+            for c, _, raw in r.messages()
+            if c.topic == "/joint_states"
+        ]
+    np.testing.assert_allclose(np.array(states), np.array(record["q"]), rtol=0, atol=1e-12)
+    assert sorted(p.name for p in (out / "bags" / "line").iterdir()) == [
+        "line_0.mcap",
+        "metadata.yaml",
+    ]
