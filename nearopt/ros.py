@@ -46,6 +46,9 @@ __all__ = [
     "BagContents",
 ]
 
+SHORTEST = 1e-6
+"""Intervals this short [s] are not halved further (the points' times are whole nanoseconds)."""
+
 MAX_POINTS = 1_000_000
 """The most points :func:`joint_trajectory` makes at the motion's knots (each refinement halves
 the intervals that need it)."""
@@ -133,7 +136,8 @@ def joint_trajectory(
 
 def _refined(motion, tolerance: float) -> NDArray[np.float64]:  # noqa: ANN001 - a Motion
     """Times from the motion's knots (and 0, t_e) with every interval halved until the quintic
-    through its ends is within ``tolerance`` at 16 points inside it."""
+    through its ends is within ``tolerance`` at 16 points inside it (or it is
+    :data:`SHORTEST`)."""
     duration = motion.duration
     t = np.unique(np.concatenate([[0.0], np.asarray(motion.t, dtype=float), [duration]]))
     t = t[(t >= 0.0) & (t <= duration)]
@@ -145,7 +149,7 @@ def _refined(motion, tolerance: float) -> NDArray[np.float64]:  # noqa: ANN001 -
         ends = (q[:-1], qd[:-1], qdd[:-1], q[1:], qd[1:], qdd[1:])
         guess = interpolate(left, right, *ends, at.reshape(-1, inside.size))
         error = np.abs(guess - motion.states(at)[0].reshape(guess.shape))
-        bad = np.max(error, axis=(1, 2)) > tolerance
+        bad = (np.max(error, axis=(1, 2)) > tolerance) & (right - left > SHORTEST)
         if not np.any(bad):
             return t
         if t.size + np.count_nonzero(bad) > MAX_POINTS:
