@@ -37,7 +37,7 @@ $(CHROMIUM):
 test: setup $(CHROMIUM)
 	$(BIN)/ruff check nearopt tests scripts
 	$(BIN)/ruff format --check nearopt tests scripts
-	$(BIN)/python -m pytest
+	$(BIN)/python -m pytest -n auto
 
 bench: setup
 	$(BIN)/python scripts/bench_dynamics.py
