@@ -49,6 +49,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from functools import cached_property
 from math import comb
 
 import clarabel
@@ -346,7 +347,7 @@ def _slowed_down(
 
 _WIDTH = 5
 """The banded kernel's window: a segment's rows touch its own and its neighbours' m (and its
-B), 5 consecutive variables of z (see :meth:`_Model.reduction`)."""
+B), 5 consecutive variables of z (see :attr:`_Model.reduction`)."""
 
 END_LEVELS = 5
 """The first and last segments are halved this many times (knots at Δ/2, Δ/4, … from each end):
@@ -528,7 +529,6 @@ class _Model:
             if np.isfinite(cap):
                 ineq.add(np.array([[beta]]), one, cap)
         self.limits, self.weights = lim, weights
-        self.kernel_iterations = 0
         self.damped = bool(np.any(robot.damping))
         self.tq: _Points | None = None
         if torque and np.any(np.isfinite(lim.effort_upper) | np.isfinite(lim.effort_lower)):
@@ -930,14 +930,13 @@ class _Model:
             raise SolverError(f"the jerk-limited timing's convex program: {solution.status}")
         return columns * np.asarray(solution.x), float(solution.obj_val)
 
+    @cached_property
     def reduction(self) -> sp.csr_matrix:
         """T: x = T z, the model's b, m and B from the banded kernel's variables z, which hold
         the C¹ conditions by construction: per inner segment k (in order) its middle Bézier
         coefficient m_k and B_k, where the first and the last inner segment's m stand for β
         (m_1 = κ β, κ = 1 + ⅔ Δ_1/Δ_0, and likewise at the end), and every inner knot's
         b_k = (Δ_k m_{k−1} + Δ_{k−1} m_k)/(Δ_{k−1} + Δ_k). Every other variable is 0."""
-        if getattr(self, "_reduction", None) is not None:
-            return self._reduction
         big_n, d, last = self.d.size, self.d, self.d.size - 1
         inner = self.inner  # 1 … N − 2
         zm = 2 * (inner - 1)  # z's column of segment k's m
@@ -958,7 +957,6 @@ class _Model:
             (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
             shape=(self.nv, 2 * inner.size),
         )
-        self._reduction = t
         return t
 
     def _window_rows(
@@ -968,7 +966,7 @@ class _Model:
         coefficient is 1, without the rows another one implies (``prune``) and without those
         on pinned variables only: start, a, e, ℓ, h. A damped arm's torque rows δ w (w ≤ √root,
         see :meth:`_torque_rows`) become δ √(root)."""
-        t = self.reduction() * unit
+        t = self.reduction * unit
         a, h = rows.matrix(self.nv)
         e = np.zeros(h.size)
         ell_rows = sp.csr_matrix((h.size, self.nv))
@@ -1001,13 +999,18 @@ class _Model:
             keep &= ~implied_rows(order, group, a_w, np.where(e == 0.0, h, -np.inf))
         return start[keep], a_w[keep], e[keep], ell_w[keep], h[keep]
 
+    @cached_property
+    def _fixed_windows(self) -> tuple[NDArray, ...]:
+        """The fixed rows in window form, once (the same for every B̄ but h ∝ 1/unit: built at
+        unit 1)."""
+        return self._window_rows(self.fixed, 1.0, prune=True)
+
+    @cached_property
     def _window_terms(self) -> tuple[NDArray, ...]:
         """The kernel's terms over z (x = T z): the duration at its Gauss points (c0 = 1), then
         the energy's cost points (c0 = 0, the squares w_j (A_j x + g_j)²): start, ℓ, ω, c0, α, g
         and the squares' weights. Built once."""
-        if getattr(self, "_terms", None) is not None:
-            return self._terms
-        t = self.reduction()
+        t = self.reduction
         b_cols, b_vals, omega = self._time_points()
         count = omega.size
         index = np.repeat(np.arange(count), 3)
@@ -1036,9 +1039,8 @@ class _Model:
             parts.append((start, ell_w, self.cost_omega, np.zeros(count), np.stack(dense, axis=1)))
             g.append(pts.g)
         weights = np.asarray(self.weights, dtype=float) if self.cp is not None else np.zeros(0)
-        self._terms = (*(np.concatenate(field) for field in zip(*parts, strict=True)),)
-        self._terms += (np.concatenate(g), weights)
-        return self._terms
+        fields = tuple(np.concatenate(field) for field in zip(*parts, strict=True))
+        return (*fields, np.concatenate(g), weights)
 
     def _window_jerk_rows(
         self, bbar: NDArray[np.float64], unit: float
@@ -1047,18 +1049,6 @@ class _Model:
         largest coefficient is 1 (none implies another: each joint's rows bound a second
         difference of b of its own sign). Their coefficients on b and m are the same for every
         B̄: their windows are built once and B_k's coefficient and the bound set per B̄."""
-        if getattr(self, "_jerk_windows", None) is None:
-            rows = _Rows()
-            joint = []
-            for j, coef in self.jerk_rows:
-                rows.add(np.repeat(self.cols3, 5, axis=0), coef, 0.0)
-                joint.append(np.full(coef.shape[0], j))
-            a, _ = rows.matrix(self.nv)
-            seg = np.tile(np.repeat(self.inner, 5), len(self.jerk_rows))
-            zb = 2 * (seg - 1) + 1  # B_k's column in z
-            start = np.clip(zb - 3, 0, 2 * self.inner.size - _WIDTH)
-            _, (coef,) = windows([(a @ self.reduction()).tocsr()], _WIDTH, start=start)
-            self._jerk_windows = (start, coef, zb - start, seg, np.concatenate(joint))
         start, coef, offset, seg, joint = self._jerk_windows
         bb, jerk = bbar[seg], self.jerk[joint]
         a = coef.copy()
@@ -1068,6 +1058,22 @@ class _Model:
         zero = np.zeros(h.size)
         return start, a / scale[:, None], zero, np.zeros_like(a), h
 
+    @cached_property
+    def _jerk_windows(self) -> tuple[NDArray, ...]:
+        """The jerk rows' b and m coefficients over z in window form, once: start, coefficients,
+        B_k's place in each window, the segment and the joint of each row."""
+        rows = _Rows()
+        joint = []
+        for j, coef in self.jerk_rows:
+            rows.add(np.repeat(self.cols3, 5, axis=0), coef, 0.0)
+            joint.append(np.full(coef.shape[0], j))
+        a, _ = rows.matrix(self.nv)
+        seg = np.tile(np.repeat(self.inner, 5), len(self.jerk_rows))
+        zb = 2 * (seg - 1) + 1  # B_k's column in z
+        start = np.clip(zb - 3, 0, 2 * self.inner.size - _WIDTH)
+        _, (coef,) = windows([(a @ self.reduction).tocsr()], _WIDTH, start=start)
+        return start, coef, zb - start, seg, np.concatenate(joint)
+
     def _solve_banded(
         self,
         bbar: NDArray[np.float64],
@@ -1075,19 +1081,17 @@ class _Model:
         torque: _Rows,
         objective: NDArray[np.float64],
     ) -> tuple[NDArray[np.float64], float] | None:
-        """The restriction by the banded interior-point kernel, in z (:meth:`reduction`): the
+        """The restriction by the banded interior-point kernel, in z (:attr:`reduction`): the
         duration's (and the energy's) epigraph cones become the kernel's terms Σ ω u/√b, the
         damped torque rows' w ≤ √b its rows' √ terms, and rows another row of the same segment
         implies are left out. None where it does not converge."""
         unit = float(np.max(bbar[self.inner]))  # z in units where b is about 1
-        if getattr(self, "_fixed_rows", None) is None:  # the same for every B̄ but h ∝ 1/unit
-            self._fixed_rows = self._window_rows(self.fixed, 1.0, prune=True)
-        parts = [self._fixed_rows, self._window_jerk_rows(bbar, unit)]
+        parts = [self._fixed_windows, self._window_jerk_rows(bbar, unit)]
         if torque.count:
             parts.append(self._window_rows(torque, unit, prune=False))
         rows = [np.concatenate([part[k] for part in parts]) for k in range(4)]
         h = np.concatenate([parts[0][4] / unit, *(part[4] for part in parts[1:])])
-        start, ell, omega, c0, alpha, g, weights = self._window_terms()
+        start, ell, omega, c0, alpha, g, weights = self._window_terms
         lin = objective.copy()
         lin[self.it.ravel()] = 0.0  # in the terms
         if self.cp is not None:
@@ -1096,14 +1100,13 @@ class _Model:
             rows[0].astype(np.int64), np.ascontiguousarray(rows[1]), rows[2],
             np.ascontiguousarray(rows[3]), h,
             start.astype(np.int64), ell * unit, omega, c0, alpha * unit, g, weights,
-            unit * (self.reduction().T @ lin),
+            unit * (self.reduction.T @ lin),
         )  # fmt: skip
         z0 = self._banded_start(bbar, previous) / unit
         solution = solve_banded(program, z0, tolerance=1e-9)
-        self.kernel_iterations += solution.iterations
         if not solution.converged:
             return None
-        return unit * (self.reduction() @ solution.z), solution.value
+        return unit * (self.reduction @ solution.z), solution.value
 
     def _banded_start(
         self, bbar: NDArray[np.float64], previous: NDArray[np.float64] | None
