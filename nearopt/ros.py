@@ -121,7 +121,7 @@ def joint_trajectory(
     motion = result.trajectory
     if rate is not None:
         check_record(result, rate)
-        samples = motion.sample(check_rate(rate))
+        samples = motion.sample(rate)  # (check_record checked the rate)
         t, q, qd, qdd, u = samples.t, samples.q, samples.qd, samples.qdd, samples.tau
     else:
         if not (is_number(tolerance) and np.isfinite(tolerance) and tolerance > 0):

@@ -345,6 +345,14 @@ def _slowed_down(
     )
 
 
+def _jerk_tangent(
+    jerk: NDArray[np.float64] | float, bbar: NDArray[np.float64]
+) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+    """The jerk row's tangent at B̄: j/√B ≥ 1.5 j/√B̄ − ½ j B̄^{-3/2} B, as B's coefficient
+    (½ j B̄^{-3/2}) and the bound (1.5 j/√B̄, tightened by :data:`MARGIN`)."""
+    return 0.5 * jerk * bbar**-1.5, (1.0 - MARGIN) * 1.5 * jerk / np.sqrt(bbar)
+
+
 _WIDTH = 5
 """The banded kernel's window: a segment's rows touch its own and its neighbours' m (and its
 B), 5 consecutive variables of z (see :attr:`_Model.reduction`)."""
@@ -871,9 +879,8 @@ class _Model:
         bb = bbar[inner]
         cols = np.hstack([np.repeat(self.cols3, 5, axis=0), np.repeat(self.iB[inner], 5)[:, None]])
         for j, coef in self.jerk_rows:
-            slope = np.repeat(0.5 * self.jerk[j] * bb**-1.5, 5)
-            rhs = np.repeat((1.0 - MARGIN) * 1.5 * self.jerk[j] / np.sqrt(bb), 5)
-            rows.add(cols, np.hstack([coef, slope[:, None]]), rhs)
+            slope, rhs = _jerk_tangent(self.jerk[j], bb)
+            rows.add(cols, np.hstack([coef, np.repeat(slope, 5)[:, None]]), np.repeat(rhs, 5))
         return rows
 
     def _objective(
@@ -1052,9 +1059,9 @@ class _Model:
         start, coef, offset, seg, joint = self._jerk_windows
         bb, jerk = bbar[seg], self.jerk[joint]
         a = coef.copy()
-        a[np.arange(a.shape[0]), offset] = 0.5 * jerk * bb**-1.5
+        a[np.arange(a.shape[0]), offset], h = _jerk_tangent(jerk, bb)
         scale = np.max(np.abs(a), axis=1)
-        h = (1.0 - MARGIN) * 1.5 * jerk / np.sqrt(bb) / (unit * scale)
+        h = h / (unit * scale)
         zero = np.zeros(h.size)
         return start, a / scale[:, None], zero, np.zeros_like(a), h
 
