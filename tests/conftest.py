@@ -3,6 +3,11 @@
 from __future__ import annotations
 
 import functools
+import socket
+import subprocess
+import sys
+from collections.abc import Iterator
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -10,6 +15,7 @@ import pytest
 import nearopt
 
 ROBOT_NAMES = nearopt.available_robots()
+BIN = Path(sys.executable).parent
 
 
 @functools.cache
@@ -35,3 +41,70 @@ def random_configuration(robot: nearopt.Robot, rng: np.random.Generator) -> np.n
     lo = np.maximum(robot.limits.position_lower, -np.pi)
     hi = np.minimum(robot.limits.position_upper, np.pi)
     return rng.uniform(lo, hi)
+
+
+def free_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+@pytest.fixture(scope="module")
+def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
+    """A dask scheduler and two single-threaded workers (with nannies) on 127.0.0.1."""
+    distributed = pytest.importorskip("distributed")
+    folder = tmp_path_factory.mktemp("dask")
+    port = free_port()
+    address = f"tcp://127.0.0.1:{port}"
+    logs = [open(folder / f"{name}.log", "w") for name in ("scheduler", "w1", "w2")]  # noqa: SIM115
+    processes = [
+        subprocess.Popen(
+            [
+                str(BIN / "dask"),
+                "scheduler",
+                "--host",
+                "127.0.0.1",
+                "--port",
+                str(port),
+                "--no-dashboard",
+            ],
+            stdout=logs[0],
+            stderr=subprocess.STDOUT,
+            cwd=folder,
+        )
+    ]
+    try:
+        for log in logs[1:]:
+            processes.append(
+                subprocess.Popen(
+                    [
+                        str(BIN / "dask"),
+                        "worker",
+                        address,
+                        "--nthreads",
+                        "1",
+                        "--nworkers",
+                        "1",
+                        "--no-dashboard",
+                        "--host",
+                        "127.0.0.1",
+                    ],
+                    stdout=log,
+                    stderr=subprocess.STDOUT,
+                    cwd=folder,
+                )
+            )
+        client = distributed.Client(address, timeout=60)
+        client.wait_for_workers(2, timeout=120)
+        yield {"address": address, "client": client, "workers": processes[1:]}
+        client.close()
+    finally:
+        for process in processes[::-1]:
+            process.terminate()
+        for process in processes:
+            try:
+                process.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                process.kill()
+        for log in logs:
+            log.close()

@@ -12,12 +12,11 @@ import socket
 import subprocess
 import sys
 import time
-from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import load
+from conftest import free_port, load
 
 import nearopt
 import nearopt.cli
@@ -31,7 +30,6 @@ from nearopt.batch import (
     run_batch,
 )
 
-BIN = Path(sys.executable).parent
 ARMS = ("two_link", "ur5", "panda")
 
 
@@ -91,73 +89,6 @@ def batch(*args: str, timeout: float = 600) -> subprocess.CompletedProcess:
 
 def without_wall_time(rows: list[dict[str, str]]) -> list[dict[str, str]]:
     return [{k: v for k, v in row.items() if k != "wall_time"} for row in rows]
-
-
-def free_port() -> int:
-    with socket.socket() as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-@pytest.fixture(scope="module")
-def cluster(tmp_path_factory: pytest.TempPathFactory) -> Iterator[dict]:
-    """A dask scheduler and two single-threaded workers (with nannies) on 127.0.0.1."""
-    distributed = pytest.importorskip("distributed")
-    folder = tmp_path_factory.mktemp("dask")
-    port = free_port()
-    address = f"tcp://127.0.0.1:{port}"
-    logs = [open(folder / f"{name}.log", "w") for name in ("scheduler", "w1", "w2")]  # noqa: SIM115
-    processes = [
-        subprocess.Popen(
-            [
-                str(BIN / "dask"),
-                "scheduler",
-                "--host",
-                "127.0.0.1",
-                "--port",
-                str(port),
-                "--no-dashboard",
-            ],
-            stdout=logs[0],
-            stderr=subprocess.STDOUT,
-            cwd=folder,
-        )
-    ]
-    try:
-        for log in logs[1:]:
-            processes.append(
-                subprocess.Popen(
-                    [
-                        str(BIN / "dask"),
-                        "worker",
-                        address,
-                        "--nthreads",
-                        "1",
-                        "--nworkers",
-                        "1",
-                        "--no-dashboard",
-                        "--host",
-                        "127.0.0.1",
-                    ],
-                    stdout=log,
-                    stderr=subprocess.STDOUT,
-                    cwd=folder,
-                )
-            )
-        client = distributed.Client(address, timeout=60)
-        client.wait_for_workers(2, timeout=120)
-        yield {"address": address, "client": client, "workers": processes[1:]}
-        client.close()
-    finally:
-        for process in processes[::-1]:
-            process.terminate()
-        for process in processes:
-            try:
-                process.wait(timeout=20)
-            except subprocess.TimeoutExpired:
-                process.kill()
-        for log in logs:
-            log.close()
 
 
 @pytest.fixture(scope="module")
