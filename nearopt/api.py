@@ -18,6 +18,7 @@ import hashlib
 import json
 import math
 import os
+import time
 import warnings
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields, replace
@@ -419,11 +420,26 @@ def _json_value(value: object) -> object:
 
 
 def _sha256(name: str) -> str | None:
-    """The SHA-256 of a file's bytes, or None if it cannot be read."""
+    """The SHA-256 of a file's bytes, or None if it cannot be read; taken again only when the
+    file's size, modification time or inode changed since (a batch of a million motions names the
+    same scene a million times)."""
     try:
-        return hashlib.sha256(Path(name).read_bytes()).hexdigest()
+        info = os.stat(name)
+        key = (name, info.st_ino, info.st_size, info.st_mtime_ns)
+        digest = _DIGESTS.get(key)
+        if digest is None:
+            digest = hashlib.sha256(Path(name).read_bytes()).hexdigest()
+            # a file changed in the last seconds may change again within the clock's tick
+            if time.time() - info.st_mtime > 2.0:  # (Linux stamps files in jiffies)
+                if len(_DIGESTS) >= 256:
+                    _DIGESTS.clear()
+                _DIGESTS[key] = digest
+        return digest
     except OSError:
         return None
+
+
+_DIGESTS: dict[tuple[str, int, int, int], str] = {}
 
 
 def _read(key: str, value: object, kind: _Kind) -> object:

@@ -30,6 +30,7 @@ import contextlib
 import csv
 import io
 import json
+import math
 import multiprocessing
 import os
 import re
@@ -39,6 +40,7 @@ import struct
 import sys
 import threading
 import time
+import uuid
 import warnings
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field, fields, replace
@@ -70,12 +72,18 @@ __all__ = [
     "check_main_guard",
     "BatchSummary",
     "SUMMARY_FIELDS",
+    "Layout",
+    "iter_requests",
+    "worker_died",
+    "progress_line",
 ]
 
 SUMMARY_FIELDS = ("id", "status", "J", "te", "iterations", "wall_time", "error")
 """The columns of ``summary.csv``."""
 _ID = re.compile(r"[A-Za-z0-9][A-Za-z0-9._-]{0,127}")  # the whole id (fullmatch: no "\n")
 MAX_ATTEMPTS = 3  # a motion whose worker died this many times is recorded as failed
+LISTED = 20
+"""Failed motions (and motions with warnings) a report lists; the summary table has them all."""
 
 
 @dataclass(frozen=True)
@@ -369,6 +377,27 @@ class Pool:
         """Plan every request; yield the outcomes in the order they finish."""
         raise NotImplementedError
 
+    retries_lost: bool = False
+    """Whether the pool itself runs a task again when its worker dies (Dask does)."""
+
+    def submit(self, fn: Callable[..., Any], *args: object) -> Any:  # pragma: no cover
+        """Run ``fn(*args)`` on a worker; a future (``.result()``)."""
+        raise NotImplementedError
+
+    def wait(self, futures: Iterable[Any]) -> list[Any]:  # pragma: no cover - interface
+        """Wait until one of ``futures`` is finished; all the finished ones."""
+        raise NotImplementedError
+
+    def lost(self, exc: BaseException) -> bool:
+        """Whether a future's exception says its worker died (the pool is then ready for new
+        tasks, and the dead worker's processes are gone)."""
+        return False
+
+    def cancel(self, futures: list[Any]) -> None:
+        """Cancel what of ``futures`` has not run."""
+        for future in futures:
+            future.cancel()
+
     def close(self, abort: bool = False) -> None:
         """Release the workers (or the connection); ``abort``: stop what runs now."""
 
@@ -492,13 +521,35 @@ class LocalPool(Pool):
                 except cf.process.BrokenProcessPool:
                     broken = True
                     if attempts[request.id] >= MAX_ATTEMPTS:
-                        yield _died(request, attempts[request.id])
+                        yield worker_died(request, attempts[request.id])
                     else:
                         pending.append(request)
             if broken:  # a worker died: a fresh pool runs what was lost
                 self._executor.shutdown(wait=False, cancel_futures=True)
                 self._executor = None
             pending.sort(key=lambda r: order[r.id])
+
+    def submit(self, fn: Callable[..., Any], *args: object) -> Any:
+        return self._start().submit(fn, *args)
+
+    def wait(self, futures: Iterable[Any]) -> list[Any]:
+        return list(cf.wait(list(futures), return_when=cf.FIRST_COMPLETED).done)
+
+    def lost(self, exc: BaseException) -> bool:
+        if not isinstance(exc, cf.process.BrokenProcessPool):
+            return False
+        executor = self._executor
+        if executor is not None and executor._broken:  # noqa: SLF001
+            # the pool fails its futures before it stops its other workers: stop them first,
+            # so that none writes on after the caller looks at what they wrote
+            processes = list(executor._processes.values())  # noqa: SLF001
+            for process in processes:
+                process.terminate()
+            for process in processes:
+                process.join(10.0)
+            executor.shutdown(wait=False, cancel_futures=True)
+            self._executor = None
+        return True
 
     def close(self, abort: bool = False) -> None:
         executor, self._executor = self._executor, None
@@ -517,7 +568,8 @@ def _worker_start() -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
-def _died(request: MotionRequest, attempts: int) -> MotionOutcome:
+def worker_died(request: MotionRequest, attempts: int) -> MotionOutcome:
+    """The outcome of a motion whose worker died ``attempts`` times."""
     error = (
         f"WorkerDied: the worker process planning it died {attempts} times (killed, out of "
         "memory, or a crash in a native library)"
@@ -677,9 +729,24 @@ class DaskPool(Pool):
                 try:
                     yield future.result()
                 except distributed.KilledWorker:
-                    yield _died(request, MAX_ATTEMPTS)
+                    yield worker_died(request, MAX_ATTEMPTS)
         finally:
             self.client.cancel(list(futures))
+
+    retries_lost = True
+
+    def submit(self, fn: Callable[..., Any], *args: object) -> Any:
+        return self.client.submit(fn, *args, pure=False, key=f"nearopt-{uuid.uuid4().hex}")
+
+    def wait(self, futures: Iterable[Any]) -> list[Any]:
+        return list(self._distributed.wait(list(futures), return_when="FIRST_COMPLETED").done)
+
+    def lost(self, exc: BaseException) -> bool:
+        return isinstance(exc, self._distributed.KilledWorker)
+
+    def cancel(self, futures: list[Any]) -> None:
+        if futures:
+            self.client.cancel(futures)
 
     def close(self, abort: bool = False) -> None:
         if self._own:
@@ -699,37 +766,70 @@ def read_requests(path: str | Path) -> list[MotionRequest]:
     ConfigurationError
         A missing file, a line that is not a JSON object (naming the line), a bad or repeated id.
     """
-    path = Path(path).expanduser().resolve()
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigurationError(
-            f"cannot read the motions file {path}: {getattr(exc, 'strerror', None) or exc}"
-        ) from None
     requests: list[MotionRequest] = []
     seen: dict[str, int] = {}
-    for number, line in enumerate(text.splitlines(), start=1):
-        if not line.strip() or line.lstrip().startswith("#"):
-            continue
-        try:
-            data = json.loads(line, object_pairs_hook=_no_repeated_keys)
-        except json.JSONDecodeError as exc:
-            raise ConfigurationError(f"{path}, line {number}: not JSON ({exc})") from None
-        except ConfigurationError as exc:  # a repeated key
-            raise ConfigurationError(f"{path}, line {number}: {exc}") from None
-        try:
-            request = MotionRequest.from_dict(data, f"line{number}", path.parent)
-        except ConfigurationError as exc:
-            raise ConfigurationError(f"{path}, line {number}: {exc}") from None
+    for number, request in iter_requests(path):
         if request.id in seen:
             raise ConfigurationError(
-                f"{path}, line {number}: id {request.id!r} repeats line {seen[request.id]}"
+                f"{request.source}, line {number}: id {request.id!r} repeats line "
+                f"{seen[request.id]}"
             )
         seen[request.id] = number
-        requests.append(replace(request, source=path))
+        requests.append(request)
     if not requests:
-        raise ConfigurationError(f"{path}: no motions (one JSON object per line)")
+        raise ConfigurationError(
+            f"{Path(path).expanduser().resolve()}: no motions (one JSON object per line)"
+        )
     return requests
+
+
+def iter_requests(path: str | Path) -> Iterator[tuple[int, MotionRequest]]:
+    """The motions of a JSON Lines file with their line numbers, read a line at a time (the
+    file is never held whole); as :func:`read_requests`, without the check that ids differ.
+
+    Raises
+    ------
+    ConfigurationError
+        A missing file, a line that is not a JSON object (naming the line), a bad id.
+    """
+    path = Path(path).expanduser().resolve()
+    try:
+        stream = path.open(encoding="utf-8")
+    except OSError as exc:
+        raise ConfigurationError(
+            f"cannot read the motions file {path}: {exc.strerror or exc}"
+        ) from None
+    with stream:
+        number = 0
+        while True:
+            try:
+                line = stream.readline()
+            except (OSError, UnicodeDecodeError) as exc:
+                raise ConfigurationError(
+                    f"cannot read the motions file {path} after line {number}: "
+                    f"{getattr(exc, 'strerror', None) or exc}"
+                ) from None
+            if not line:
+                return
+            number += 1
+            if not line.strip() or line.lstrip().startswith("#"):
+                continue
+            yield number, _motion_line(path, number, line)
+
+
+def _motion_line(path: Path, number: int, line: str) -> MotionRequest:
+    """Line ``number`` of the motions file ``path`` as a request."""
+    try:
+        data = json.loads(line, object_pairs_hook=_no_repeated_keys)
+    except json.JSONDecodeError as exc:
+        raise ConfigurationError(f"{path}, line {number}: not JSON ({exc})") from None
+    except ConfigurationError as exc:  # a repeated key
+        raise ConfigurationError(f"{path}, line {number}: {exc}") from None
+    try:
+        request = MotionRequest.from_dict(data, f"line{number}", path.parent)
+    except ConfigurationError as exc:
+        raise ConfigurationError(f"{path}, line {number}: {exc}") from None
+    return replace(request, source=path)
 
 
 def _requests(
@@ -811,6 +911,21 @@ def plan_many(
     return outcomes  # type: ignore[return-value]
 
 
+class Layout(StrEnum):
+    """How a batch's results are written."""
+
+    FILES = "files"
+    """``DIR/<id>.json`` per motion planned (``DIR/failed/<id>.json`` per failure), written by
+    the client, and ``DIR/summary.csv`` in request order, rewritten as results arrive: for
+    batches of up to a few thousand motions."""
+    SHARDS = "shards"
+    """``DIR/shards/*.jsonl`` written by the workers, a chunk of motions each, and
+    ``DIR/summary.csv`` appended (:mod:`nearopt.sharded`): for motion tables of any size."""
+    AUTO = "auto"
+    """The layout a folder has already; else shards for more than
+    :data:`~nearopt.sharded.SHARDS_FROM` motions, files otherwise."""
+
+
 @dataclass(frozen=True)
 class BatchSummary:
     """How a batch went.
@@ -818,26 +933,53 @@ class BatchSummary:
     Attributes
     ----------
     outcomes
-        Every motion's outcome, in request order (those skipped as done read back from their
-        files, without ``document``).
+        Files layout: every motion's outcome, in request order (those skipped as done read back
+        from their files, without ``document``). Shards layout: the first failures of this run
+        (the summary table has them all).
     skipped
         Motions found done from an earlier run and not planned again.
     wall_time
         Seconds this run took.
+    total, planned_count, failed_count
+        Motions in the batch, planned, failed (the skipped ones included); counted from
+        ``outcomes`` when not given.
+    tasks
+        Tasks submitted to the pool (a motion each in the files layout, a chunk in shards).
+    layout
+        How its results were written.
     """
 
     outcomes: tuple[MotionOutcome, ...]
     skipped: int
     wall_time: float
+    total: int | None = None
+    planned_count: int | None = None
+    failed_count: int | None = None
+    tasks: int = 0
+    layout: Layout = Layout.FILES
 
     @property
     def failed(self) -> int:
         """Motions that failed."""
+        if self.failed_count is not None:
+            return self.failed_count
         return sum(o.status == OutcomeStatus.FAILED for o in self.outcomes)
+
+    @property
+    def planned(self) -> int:
+        """Motions planned (in this run or before)."""
+        if self.planned_count is not None:
+            return self.planned_count
+        return sum(o.status == OutcomeStatus.PLANNED for o in self.outcomes)
+
+    @property
+    def count(self) -> int:
+        """Motions in the batch."""
+        return len(self.outcomes) if self.total is None else self.total
 
 
 def run_batch(
-    requests: Sequence[MotionRequest],
+    requests: Sequence[MotionRequest] | str | Path,
     out: str | Path,
     client: object | None = None,
     *,
@@ -846,13 +988,15 @@ def run_batch(
     retry_failed: bool = False,
     progress: Callable[[int, int, int, int, float], None] | None = None,
     ros_bag: bool = False,
+    layout: Layout | str = Layout.AUTO,
 ) -> BatchSummary:
-    """Plan every motion not already done and write its file; keep ``summary.csv`` current.
+    """Plan every motion not already done and write its results (see :class:`Layout`).
 
     Parameters
     ----------
     requests
-        The motions (:func:`read_requests`).
+        The motions (:func:`read_requests`), or a motions file (JSON Lines), read a line at a
+        time in the shards layout.
     out
         The output folder (made if missing).
     client, workers, rate
@@ -865,22 +1009,91 @@ def run_batch(
         Also write each motion planned in this run as a rosbag2 ``DIR/bags/<id>/``
         (:func:`nearopt.ros.write_ros_bag`; before its JSON, so that a motion whose JSON is
         written has its bag; a motion skipped as done gets none).
+    layout
+        Files, shards, or auto (:class:`Layout`).
+
+    Raises
+    ------
+    ConfigurationError
+        A bad motions file or option, a folder of the other layout, a folder another batch is
+        writing, an unreachable scheduler: before anything is planned.
     """
+    from .sharded import MotionsFile, run_sharded
+
     t0 = time.perf_counter()
     check_rate(rate)
+    layout = _layout_value(layout)
+    if isinstance(requests, str | Path):
+        motions = MotionsFile.scan(requests)
+    else:
+        motions = MotionsFile.of(requests)
+    layout = _layout_of(Path(out).expanduser(), layout, motions.count)
     # a cluster is reached (and its address probed, DaskPool) before anything is made; this
     # machine's pool starts when needed
     cluster = None if client is None or isinstance(client, Pool) else _pool(client, workers)
     if client is None:  # this machine's pool: a script without a main guard makes nothing
         check_main_guard()
     try:
-        return _run_batch(
-            requests, out, client if cluster is None else cluster, workers, rate, retry_failed,
-            progress, t0, ros_bag,
-        )  # fmt: skip
+        where = client if cluster is None else cluster
+        if layout == Layout.FILES:
+            listed = list(motions) if motions.path is not None else list(motions.requests)
+            return _run_batch(
+                listed, out, where, workers, rate, retry_failed, progress, t0, ros_bag
+            )
+        folder = make_folder(out, "the motions")
+        _refuse_inputs(folder, [], motions.path)
+        pool = _pool(where, workers)
+        own, aborted = pool is not where, True
+        try:
+            summary = run_sharded(motions, folder, pool, rate, retry_failed, progress, ros_bag)
+            aborted = False
+        finally:
+            if own:
+                pool.close(abort=aborted)
+        return replace(summary, wall_time=time.perf_counter() - t0, layout=Layout.SHARDS)
     finally:
         if cluster is not None:
             cluster.close()
+
+
+def _layout_value(layout: Layout | str) -> Layout:
+    try:
+        return Layout(layout)
+    except ValueError:
+        raise ConfigurationError(
+            f"layout {layout!r}: one of {', '.join(repr(str(v)) for v in Layout)}"
+        ) from None
+
+
+def _layout_of(folder: Path, layout: Layout, count: int) -> Layout:
+    """The layout a batch writes ``folder`` in: the one asked for, if the folder holds no
+    batch of the other; for auto, the folder's own, else by the number of motions.
+
+    Raises
+    ------
+    ConfigurationError
+        A folder of the other layout.
+    """
+    from .sharded import SHARD_FIELDS, SHARDS_FROM
+
+    found = None
+    try:
+        with (folder / "summary.csv").open(encoding="utf-8") as stream:
+            header = stream.readline().rstrip("\n").split(",")
+        found = Layout.SHARDS if tuple(header) == SHARD_FIELDS else Layout.FILES
+    except (OSError, UnicodeDecodeError):
+        if (folder / "shards").is_dir():
+            found = Layout.SHARDS
+    if layout == Layout.AUTO:
+        if found is not None:
+            return found
+        return Layout.SHARDS if count > SHARDS_FROM else Layout.FILES
+    if found is not None and found != layout:
+        raise ConfigurationError(
+            f"{folder} holds a batch in the {found} layout, not {layout}: give --out another "
+            f"folder, or --layout {found} (or auto) to go on with it"
+        )
+    return layout
 
 
 def _run_batch(
@@ -954,11 +1167,16 @@ def _light(outcome: MotionOutcome) -> MotionOutcome:
     return replace(outcome, document="", result=None, bag=None)
 
 
-def _refuse_inputs(folder: Path, requests: list[MotionRequest]) -> None:
+def _refuse_inputs(folder: Path, requests: list[MotionRequest], source: Path | None = None) -> None:
     """Refuse a batch whose outputs (a motion's file, the summary) would replace one of its
     inputs (the motions file, a motion's URDF, SRDF, scene or task), before anything is
     planned."""
     summary = folder / "summary.csv"
+    for output in (summary, folder / "batch.lock"):
+        if source is not None and _same_file(output, source):
+            raise ConfigurationError(
+                f"the motions file {source} is the batch's {output.name}: give --out another folder"
+            )
     for request in requests:
         inputs = {} if request.source is None else {"the motions file": request.source}
         for key in FILE_FIELDS:
@@ -1042,18 +1260,37 @@ def _summary_text(requests: Sequence[MotionRequest], outcomes: Mapping[str, Moti
     return buffer.getvalue()
 
 
-def progress_line(stream: Any = None) -> Callable[[int, int, int, int, float], None]:
-    """A progress reporter: a bar rewritten in place on a terminal, else one line per result."""
+def progress_line(
+    stream: Any = None, every: float = 10.0
+) -> Callable[[int, int, int, int, float], None]:
+    """A progress reporter: a bar rewritten in place on a terminal (motions done of all,
+    failed, running, motions per second in this run, ETA); elsewhere (a log) the same as a line
+    at most every ``every`` seconds, and the last."""
     stream = sys.stderr if stream is None else stream
     tty = getattr(stream, "isatty", lambda: False)()
+    first: list[float] = []  # (time, done) of the first report
+    last = [-math.inf]
 
     def report(done: int, failed: int, running: int, total: int, eta: float) -> None:
+        now = time.monotonic()
+        if not first:
+            first.extend((now, done))
+        if not tty and now - last[0] < every and done < total:
+            return
+        last[0] = now
         width = 24
         bar = "#" * round(width * done / max(total, 1))
-        minutes, seconds = divmod(round(eta), 60)
+        elapsed = now - first[0]
+        rate = f"{(done - first[1]) / elapsed:.1f}/s" if elapsed > 0 else "-/s"
+        if math.isfinite(eta):
+            minutes, seconds = divmod(round(eta), 60)
+            hours, minutes = divmod(minutes, 60)
+            left = f"{hours}h{minutes:02d}m" if hours else f"{minutes}m{seconds:02d}s"
+        else:
+            left = "-"
         line = (
             f"[{bar:<{width}}] {done}/{total} done, {failed} failed, {running} running, "
-            f"ETA {minutes}m{seconds:02d}s"
+            f"{rate}, ETA {left}"
         )
         print(("\r" + line) if tty else line, end="" if tty else "\n", file=stream, flush=True)
         if tty and done == total:

@@ -401,6 +401,14 @@ def _batch_parser(sub: argparse._SubParsersAction) -> None:  # noqa: SLF001 - ar
         action="store_true",
         help="plan again the motions an earlier run recorded as failed",
     )
+    b.add_argument(
+        "--layout",
+        choices=("auto", "files", "shards"),
+        default="auto",
+        help="files: DIR/<id>.json per motion; shards: DIR/shards/*.jsonl written by the "
+        "workers a chunk at a time, DIR/summary.csv appended (for motion tables of any size); "
+        "auto (default): the folder's own, else shards above 1000 motions",
+    )
     b.add_argument("--quiet", action="store_true", help="no progress bar")
 
 
@@ -621,17 +629,16 @@ def _show(result: PlanResult | TaskResult, out: TextIO) -> None:
 def _batch_command(args: argparse.Namespace) -> int:
     """``nearopt batch``: exit code 0 if every motion was planned, 1 if some failed, 130 on
     Ctrl-C (what was written stays: run it again to go on)."""
-    from .batch import progress_line, read_requests, run_batch
+    from .batch import LISTED, progress_line, run_batch
 
     check_rate(args.rate, "--rate")
     if args.workers is not None and args.workers < 1:
         raise ConfigurationError(f"--workers must be ≥ 1, got {args.workers}")
-    requests = read_requests(args.tasks)
     # Ctrl-C stops the batch (as it ends `plan`), even where SIGINT was inherited ignored
     signal.signal(signal.SIGINT, signal.default_int_handler)
     t0 = time.perf_counter()
     summary = run_batch(
-        requests,
+        args.tasks,
         args.out,
         args.scheduler,
         workers=args.workers,
@@ -639,18 +646,25 @@ def _batch_command(args: argparse.Namespace) -> int:
         retry_failed=args.retry_failed,
         progress=None if args.quiet else progress_line(),
         ros_bag=args.ros_bag,
+        layout=args.layout,
     )
-    planned = len(summary.outcomes) - summary.failed
+    wall = time.perf_counter() - t0
+    fresh = summary.planned + summary.failed - summary.skipped
     print(
-        f"{len(requests)} motions: {planned} planned, {summary.failed} failed"
+        f"{summary.count} motions: {summary.planned} planned, {summary.failed} failed"
         + (f" ({summary.skipped} done before, skipped)" if summary.skipped else "")
-        + f", {time.perf_counter() - t0:.1f} s; wrote {Path(args.out) / 'summary.csv'}"
+        + f", {wall:.1f} s"
+        + (f" ({fresh / wall:.1f} motions/s, {summary.tasks} tasks)" if fresh and wall else "")
+        + f"; wrote {Path(args.out) / 'summary.csv'}"
     )
-    for outcome in summary.outcomes:
+    listed = [o for o in summary.outcomes if o.error or o.warnings]
+    for outcome in listed[:LISTED]:
         if outcome.error:
             print(f"  {outcome.id}: {outcome.error}", file=sys.stderr)
         for message in outcome.warnings:
             print(f"  {outcome.id}: warning: {message}", file=sys.stderr)
+    if len(listed) > LISTED or (summary.layout == "shards" and summary.failed > len(listed)):
+        print(f"  … the rest in {Path(args.out) / 'summary.csv'}", file=sys.stderr)
     return 1 if summary.failed else 0
 
 
