@@ -20,6 +20,12 @@ follow.
 results arrive, every file atomically; run again, it skips the motions whose files hold the same
 request (the same options, the same contents of the files they name, the same rate).
 :func:`plan_many` returns the plans themselves, in request order.
+
+That is the files layout (:class:`Layout`), for batches of up to a few thousand motions. For
+motion tables of any size, the shards layout (:mod:`nearopt.sharded`, the default above 1 000
+motions) streams the motions file, sends the motions in chunks, lets the workers write the
+documents into ``DIR/shards/*.jsonl`` and appends ``DIR/summary.csv``, the index a resumed run
+reads.
 """
 
 from __future__ import annotations

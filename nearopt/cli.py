@@ -373,7 +373,8 @@ def _batch_parser(sub: argparse._SubParsersAction) -> None:  # noqa: SLF001 - ar
         "--out",
         required=True,
         metavar="DIR",
-        help="write DIR/<id>.json per motion and DIR/summary.csv",
+        help="write DIR/<id>.json per motion (or DIR/shards/*.jsonl: --layout) and "
+        "DIR/summary.csv",
     )
     where = b.add_mutually_exclusive_group()
     where.add_argument(
@@ -663,8 +664,10 @@ def _batch_command(args: argparse.Namespace) -> int:
             print(f"  {outcome.id}: {outcome.error}", file=sys.stderr)
         for message in outcome.warnings:
             print(f"  {outcome.id}: warning: {message}", file=sys.stderr)
-    if len(listed) > LISTED or (summary.layout == "shards" and summary.failed > len(listed)):
-        print(f"  … the rest in {Path(args.out) / 'summary.csv'}", file=sys.stderr)
+    unlisted = summary.failed - sum(1 for o in listed[:LISTED] if o.error)
+    if unlisted > 0 or len(listed) > LISTED:
+        more = f"{unlisted} more failed" if unlisted > 0 else "more"
+        print(f"  … {more}: {Path(args.out) / 'summary.csv'} lists every one", file=sys.stderr)
     return 1 if summary.failed else 0
 
 

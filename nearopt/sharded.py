@@ -356,8 +356,8 @@ class ShardIndex:
 
     def _note(self, row: list[str] | tuple[str, ...]) -> None:
         self._ids.append(_id_hash(row[0]))
-        self._requests.append(int.from_bytes(bytes.fromhex(row[-2][:16]), "little", signed=True))
-        self._failed.append(row[1] == str(OutcomeStatus.FAILED))
+        self._requests.append(_hash64(row[-2]))
+        self._failed.append(_failed(row))
         self.shards.add(row[-1])
 
     def _freeze(self) -> None:
@@ -374,15 +374,21 @@ class ShardIndex:
         return int(self._keys.size)
 
     def append(self, rows: tuple[tuple[str, ...], ...] | list[tuple[str, ...]]) -> None:
-        """Append rows (one write, flushed to the disk)."""
+        """Append rows: one ``write`` call (Ctrl-C comes before or after it, not amid the
+        rows), flushed to the disk."""
         if not rows:
             return
         buffer = io.StringIO()
         csv.writer(buffer, lineterminator="\n").writerows(rows)
-        with self.path.open("a", encoding="utf-8") as stream:
-            stream.write(buffer.getvalue())
-            stream.flush()
-            os.fsync(stream.fileno())
+        data = buffer.getvalue().encode()
+        fd = os.open(self.path, os.O_WRONLY | os.O_APPEND)
+        try:
+            written = os.write(fd, data)
+            while written < len(data):  # a regular file takes all at once; if not, the rest
+                written += os.write(fd, data[written:])
+            os.fsync(fd)
+        finally:
+            os.close(fd)
 
     def is_done(self, request: MotionRequest, rate: float, retry_failed: bool) -> bool | None:
         """Whether the motion was done before with this very request: True (planned), None
@@ -394,32 +400,52 @@ class ShardIndex:
         failed = bool(self._failures[at])
         if failed and retry_failed:
             return False
-        digest = bytes.fromhex(request_digest(request.fingerprint(rate))[:16])
-        if int.from_bytes(digest, "little", signed=True) != self._digests[at]:
+        if _hash64(request_digest(request.fingerprint(rate))) != self._digests[at]:
             return False
         return None if failed else True
 
     def _recover(self, shards: Path) -> None:
-        """Index the shards (and ``.part`` files) no row names: written by a run whose client
-        stopped before it indexed them. ``.part`` files are renamed as shards."""
-        known: set[int] | None = None
-        for path in sorted(shards.glob("*.part")) + sorted(shards.glob("*.jsonl")):
+        """Index the shards (and ``.part`` files) no row names, oldest first: written by a run
+        whose client stopped before it indexed them (``.part`` files are renamed as shards). A
+        motion's row is added unless the index has it already with the same request and
+        status."""
+        known: dict[int, tuple[int, bool]] | None = None
+        paths = [*shards.glob("*.part"), *shards.glob("*.jsonl")]
+        for path in sorted(paths, key=lambda p: p.stem):
             name = path.name.replace(".part", ".jsonl")
             if name in self.shards or not path.exists():
                 continue
             if known is None:  # only when there is a shard to recover
-                known = set(self._ids)
+                known = {
+                    key: (digest, bool(failed))
+                    for key, digest, failed in zip(
+                        self._ids, self._requests, self._failed, strict=True
+                    )
+                }
             rows = read_shard(path, cut=True)
             if path.suffix == ".part":
                 if not rows:
                     path.unlink()
                     continue
                 os.replace(path, shards / name)
-            fresh = [row for row in rows if _id_hash(row[0]) not in known]
+            fresh = []
+            for row in rows:
+                key, value = _id_hash(row[0]), (_hash64(row[-2]), _failed(row))
+                if known.get(key) != value:
+                    fresh.append(row)
+                    known[key] = value
             self.append(fresh)
             for row in fresh:
                 self._note(row)
-                known.add(_id_hash(row[0]))
+
+
+def _hash64(digest: str) -> int:
+    """The first 64 bits of a hex digest, as a signed integer."""
+    return int.from_bytes(bytes.fromhex(digest[:16]), "little", signed=True)
+
+
+def _failed(row: tuple[str, ...] | list[str]) -> bool:
+    return row[1] == str(OutcomeStatus.FAILED)
 
 
 # --------------------------------------------------------------------------------------------
@@ -459,7 +485,7 @@ class _Counts:
 
     def add(self, rows: tuple[tuple[str, ...], ...] | list[tuple[str, ...]]) -> None:
         for row in rows:
-            if row[1] == str(OutcomeStatus.FAILED):
+            if _failed(row):
                 self.failed += 1
                 if len(self.listed) < LISTED:
                     self.listed.append(MotionOutcome(row[0], OutcomeStatus.FAILED, error=row[6]))

@@ -28,6 +28,7 @@ from nearopt.sharded import (
     Chunk,
     ChunkDone,
     MotionsFile,
+    ShardIndex,
     _Chunking,
     plan_chunk,
     read_shard,
@@ -173,6 +174,41 @@ def test_a_chunk_run_again_plans_only_what_its_part_file_lacks(tmp_path: Path) -
     ]
     assert plan_chunk(Chunk("c2", requests), str(tmp_path), 1000.0).planned == 0  # done
     assert [row[0] for row in read_shard(shard)] == [r.id for r in requests]
+
+
+def test_the_index_cuts_a_torn_row_keeps_the_last_of_an_id_and_recovers_shards(
+    tmp_path: Path,
+) -> None:
+    """summary.csv read back: a row cut short (the client killed amid a write) is cut off; the
+    last row of an id decides; a shard or .part no row names is indexed once."""
+    a = MotionRequest.from_dict({"robot": "two_link", "q0": [0, 0], "qe": [1, 0]}, "a")
+    b = MotionRequest.from_dict({"robot": "two_link", "q0": [0, 0], "qe": [0, 1]}, "b")
+    c = MotionRequest.from_dict({"robot": "two_link", "q0": [1, 0], "qe": [0, 1]}, "c")
+
+    def document(request: MotionRequest, **fields: object) -> str:
+        request_json = json.loads(request.fingerprint(1000.0))
+        return json.dumps({"id": request.id, "request": request_json, **fields}) + "\n"
+
+    shards = tmp_path / "shards"
+    shards.mkdir()
+    (shards / "s1.jsonl").write_text(document(a, error="Boom: no") + document(b, J=1.0))
+    (shards / "s2.part").write_text(document(c, J=2.0) + document(a, J=3.0)[:30])
+    index = ShardIndex.open(tmp_path)  # no summary yet: both shards recovered
+    assert len(index) == 3 and not (shards / "s2.part").exists()
+    assert (shards / "s2.jsonl").read_text() == document(c, J=2.0)  # the torn line cut
+    assert index.is_done(a, 1000.0, retry_failed=False) is None  # failed: skipped
+    assert index.is_done(a, 1000.0, retry_failed=True) is False
+    assert index.is_done(b, 1000.0, retry_failed=False) is True
+    assert index.is_done(b, 500.0, retry_failed=False) is False  # another rate: planned again
+    (shards / "s3.jsonl").write_text(document(a, J=4.0, batch={"status": "converged"}))
+    with (tmp_path / "summary.csv").open("a") as stream:
+        stream.write("b,converged,1.0,")  # torn
+    again = ShardIndex.open(tmp_path)
+    assert len(again) == 3 and again.is_done(a, 1000.0, retry_failed=False) is True
+    text = (tmp_path / "summary.csv").read_text()
+    assert text.endswith("\n") and "b,converged,1.0,\n" not in text + "\n"
+    assert [line.split(",")[0] for line in text.splitlines()[1:]] == ["a", "b", "c", "a"]
+    assert len(ShardIndex.open(tmp_path)) == 3  # nothing more to recover
 
 
 def test_chunks_are_sized_from_the_time_per_motion() -> None:
