@@ -373,8 +373,7 @@ def _batch_parser(sub: argparse._SubParsersAction) -> None:  # noqa: SLF001 - ar
         "--out",
         required=True,
         metavar="DIR",
-        help="write DIR/<id>.json per motion (or DIR/shards/*.jsonl: --layout) and "
-        "DIR/summary.csv",
+        help="write DIR/<id>.json per motion (or DIR/shards/*.jsonl: --layout) and DIR/summary.csv",
     )
     where = b.add_mutually_exclusive_group()
     where.add_argument(

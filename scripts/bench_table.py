@@ -165,10 +165,11 @@ def main() -> None:
                     result = run(tables[size], out, where)
                     files = check(out, size)
                     cost = result["wall"] * WORKERS / size
+                    wall, rss, cpu, tasks = (result[k] for k in ("wall", "rss", "cpu", "tasks"))
                     print(
-                        f"{pool:6} {size:8d} {result['wall']:9.1f} {size / result['wall']:10.1f} "
-                        f"{result['rss']:8.0f} MB {result['cpu']:8.1f} s {result['tasks']:6d} {files:6d} "
-                        f"{cost * 1e3:8.2f} ms {cost / per_motion - 1:+9.1%}",
+                        f"{pool:6} {size:8d} {wall:9.1f} {size / wall:10.1f} {rss:8.0f} MB "
+                        f"{cpu:8.1f} s {tasks:6.0f} {files:6d} {cost * 1e3:8.2f} ms "
+                        f"{cost / per_motion - 1:+9.1%}",
                         flush=True,
                     )
             finally:

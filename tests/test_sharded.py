@@ -21,8 +21,7 @@ import numpy as np
 import pytest
 
 from nearopt.batch import Layout, LocalPool, MotionRequest, progress_line, run_batch
-from nearopt.errors import ConfigurationError
-from nearopt.sharded import (
+from nearopt.batch.shards import (
     CHUNK_SECONDS,
     SHARD_FIELDS,
     Chunk,
@@ -33,6 +32,7 @@ from nearopt.sharded import (
     plan_chunk,
     read_shard,
 )
+from nearopt.errors import ConfigurationError
 
 
 def quick_motions(count: int, seed: int = 1, **options: object) -> list[dict]:

@@ -48,7 +48,9 @@ from typing import Any
 
 import numpy as np
 
-from .batch import (
+from ..errors import ConfigurationError, NearoptError
+from ..ros import replace_folder
+from .motions import (
     LISTED,
     MAX_ATTEMPTS,
     SUMMARY_FIELDS,
@@ -56,13 +58,11 @@ from .batch import (
     MotionOutcome,
     MotionRequest,
     OutcomeStatus,
-    Pool,
     iter_requests,
     plan_request,
     worker_died,
 )
-from .errors import ConfigurationError, NearoptError
-from .ros import replace_folder
+from .pools import Pool
 
 __all__ = [
     "SHARD_FIELDS",
