@@ -7,8 +7,10 @@ every pool and table size the CLI runs in a child process of its own; printed: w
 motions per second, the client's peak resident memory and CPU time (its process only, polled
 every 0.1 s),
 tasks submitted, files written, and the cost per motion on the W workers (wall × W / motions)
-against a bare loop of the same plans in one process (``plan_request`` on the first
-``--bare`` motions, no pool, no files): the overhead of the batch. Every run is checked: each
+against a bare loop of the same plans in one process (``plan_request`` on ``--bare`` motions,
+no pool, no files): the overhead of the batch; and against the same loop run by as many
+processes as workers side by side (the cost per motion when the cores are shared, which no pool
+avoids): the batch's own overhead. Every run is checked: each
 motion once in the summary and once in the shards.
 
     python scripts/bench_table.py [--sizes 10000 100000] [--pools local dask] [--bare 1000]
@@ -47,20 +49,32 @@ def write_motions(path: Path, count: int, seed: int = 28) -> None:
         stream.write(json.dumps({"id": "infeasible", "robot": "two_link", "qe": [9, 0]}) + "\n")
 
 
-def bare(path: Path, count: int) -> float:
-    """Seconds per motion of ``plan_request`` over the first ``count`` motions in one process
-    (after 20 to warm up), run in a child process."""
+def bare(path: Path, count: int, processes: int = 1) -> float:
+    """Seconds per motion of ``plan_request`` over ``count`` motions (after 20 to warm up) in a
+    child process; with ``processes`` > 1, that many at once on different motions (the wall
+    time of the slowest over all their motions, times ``processes``: the cost per motion on
+    as many cores, as a pool's workers see it)."""
     code = (
         "import sys, time, itertools\n"
         "from nearopt.batch import iter_requests, plan_request\n"
-        f"motions = [r for _, r in itertools.islice(iter_requests({str(path)!r}), {count + 20})]\n"
+        "skip = int(sys.argv[1])\n"
+        f"lines = itertools.islice(iter_requests({str(path)!r}), skip, skip + {count + 20})\n"
+        "motions = [r for _, r in lines]\n"
         "for r in motions[:20]: plan_request(r)\n"
         "t0 = time.perf_counter()\n"
         "for r in motions[20:]: plan_request(r)\n"
-        f"print((time.perf_counter() - t0) / {count})\n"
+        "print(time.perf_counter() - t0)\n"
     )
-    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    return float(done.stdout.split()[-1])
+    children = [
+        subprocess.Popen(
+            [sys.executable, "-c", code, str(k * (count + 20))], stdout=subprocess.PIPE, text=True
+        )
+        for k in range(processes)
+    ]
+    walls = [float(child.communicate()[0].split()[-1]) for child in children]
+    if any(child.returncode for child in children):
+        raise SystemExit("the bare loop failed")
+    return max(walls) / count
 
 
 def run(path: Path, out: Path, where: list[str]) -> dict[str, float]:
@@ -148,10 +162,16 @@ def main() -> None:
             tables[size] = folder / f"motions-{size}.jsonl"
             write_motions(tables[size], size)
         per_motion = bare(tables[max(args.sizes)], args.bare)
-        print(f"bare loop, one process: {per_motion * 1e3:.2f} ms per motion ({args.bare} motions)")
+        side_by_side = bare(tables[max(args.sizes)], args.bare, WORKERS)
+        print(
+            f"bare loop, one process: {per_motion * 1e3:.2f} ms per motion ({args.bare} motions); "
+            f"{WORKERS} processes side by side: {side_by_side * 1e3:.2f} ms per motion per core "
+            f"({side_by_side / per_motion - 1:+.1%}: the cores' own scaling)"
+        )
         print(
             f"\n{'pool':6} {'motions':>8} {'wall [s]':>9} {'motions/s':>10} {'client RSS':>11} "
-            f"{'client CPU':>10} {'tasks':>6} {'files':>6} {'per motion':>11} {'overhead':>9}"
+            f"{'client CPU':>10} {'tasks':>6} {'files':>6} {'per motion':>11} {'overhead':>9} "
+            f"{'vs side by side':>15}"
         )
         for pool in args.pools:
             processes: list[subprocess.Popen] = []
@@ -169,7 +189,7 @@ def main() -> None:
                     print(
                         f"{pool:6} {size:8d} {wall:9.1f} {size / wall:10.1f} {rss:8.0f} MB "
                         f"{cpu:8.1f} s {tasks:6.0f} {files:6d} {cost * 1e3:8.2f} ms "
-                        f"{cost / per_motion - 1:+9.1%}",
+                        f"{cost / per_motion - 1:+9.1%} {cost / side_by_side - 1:+15.1%}",
                         flush=True,
                     )
             finally:
