@@ -299,7 +299,7 @@ def test_killed_local_workers_lose_nothing_and_plan_nothing_twice(tmp_path: Path
 def test_an_interrupted_client_loses_nothing_and_plans_nothing_twice(tmp_path: Path) -> None:
     """Ctrl-C to ``nearopt batch`` mid-table: what its workers had finished is kept (shards,
     the index, or .part files the next run indexes); the next run plans only the rest."""
-    records = quick_motions(150, seed=5)
+    records = quick_motions(80, seed=5)
     tasks = write(tmp_path, records)
     out = tmp_path / "out"
     command = [sys.executable, "-m", "nearopt.cli", "batch", str(tasks), "--out", str(out)]
@@ -310,7 +310,7 @@ def test_an_interrupted_client_loses_nothing_and_plans_nothing_twice(tmp_path: P
         text=True,
     )
     deadline = time.time() + 300
-    while time.time() < deadline and len(rows(out) if (out / "summary.csv").exists() else []) < 20:
+    while time.time() < deadline and len(rows(out) if (out / "summary.csv").exists() else []) < 10:
         time.sleep(0.05)
     process.send_signal(signal.SIGINT)
     _, stderr = process.communicate(timeout=120)
@@ -323,7 +323,7 @@ def test_an_interrupted_client_loses_nothing_and_plans_nothing_twice(tmp_path: P
         for line in shard.read_text().splitlines()
         if line.endswith("}")
     }
-    assert 20 <= len(indexed) < len(records) and indexed <= kept
+    assert 10 <= len(indexed) < len(records) and indexed <= kept
     run = subprocess.run([*command, "--quiet"], capture_output=True, text=True, timeout=600)
     assert run.returncode == 1, run.stderr
     assert f"({len(kept)} done before, skipped)" in run.stdout  # .part files' motions too
@@ -333,13 +333,13 @@ def test_an_interrupted_client_loses_nothing_and_plans_nothing_twice(tmp_path: P
 
 @pytest.mark.slow
 def test_a_killed_dask_worker_loses_nothing_and_plans_nothing_twice(
-    cluster: dict, tmp_path: Path
+    cluster: dict, table: tuple, tmp_path: Path
 ) -> None:
     """SIGKILL to both Dask workers while a chunk is half done: the scheduler runs the chunks
     again on the restarted workers, which plan only what the .part files lack; the same table
     as on the local pool."""
     psutil = pytest.importorskip("psutil")
-    records = quick_motions(60, seed=6)
+    tasks, local, records = table
     killed: list[int] = []
 
     out = tmp_path / "dask"
@@ -354,16 +354,10 @@ def test_a_killed_dask_worker_loses_nothing_and_plans_nothing_twice(
                         killed.append(child.pid)
             time.sleep(0.002)
 
-    summary = run_batch(
-        write(tmp_path, records), out, cluster["client"], progress=kill_once, layout="shards"
-    )
-    assert killed and summary.planned == 59 and summary.failed == 1
+    summary = run_batch(tasks, out, cluster["client"], progress=kill_once, layout="shards")
+    assert killed and summary.planned == len(records) - 1 and summary.failed == 1
     assert sorted(d["id"] for d in documents(out)) == sorted(r["id"] for r in records)
     assert Counter(r["id"] for r in rows(out)) == Counter(r["id"] for r in records)
-    local = run_batch(write(tmp_path, records), tmp_path / "local", workers=2, layout="shards")
-    assert local.planned == 59
     mine = {r["id"]: (r["status"], r["J"], r["te"], r["request"]) for r in rows(out)}
-    theirs = {
-        r["id"]: (r["status"], r["J"], r["te"], r["request"]) for r in rows(tmp_path / "local")
-    }
-    assert mine == theirs
+    theirs = {r["id"]: (r["status"], r["J"], r["te"], r["request"]) for r in rows(local)}
+    assert mine == theirs  # the same table as on the local pool
