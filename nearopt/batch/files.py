@@ -161,24 +161,7 @@ def _done(
             continue
         if not isinstance(document, dict) or document.get("request") != wanted:
             continue
-        if not planned:
-            return MotionOutcome(
-                request.id,
-                OutcomeStatus.FAILED,
-                error=document.get("error"),
-                wall_time=float(document.get("wall_time", 0.0)),
-            )
-        record = document.get("batch", {})
-        return MotionOutcome(
-            request.id,
-            OutcomeStatus.PLANNED,
-            stop=record.get("status"),
-            J=document.get("J"),
-            te=document.get("duration"),
-            iterations=record.get("iterations"),
-            wall_time=float(record.get("wall_time", 0.0)),
-            warnings=tuple(record.get("warnings", ())),
-        )
+        return MotionOutcome.from_document({**document, "id": request.id}, planned)
     return None
 
 

@@ -196,6 +196,29 @@ class MotionOutcome:
     result: PlanResult | TaskResult | None = field(default=None, repr=False)
     bag: BagContents | None = field(default=None, repr=False)
 
+    @classmethod
+    def from_document(cls, document: Mapping[str, Any], planned: bool) -> MotionOutcome:
+        """The outcome a motion's document records (a file of the files layout, a line of a
+        shard): of a motion ``planned`` (its ``batch`` record) or failed (its ``error``)."""
+        if not planned:
+            return cls(
+                document["id"],
+                OutcomeStatus.FAILED,
+                error=str(document.get("error")),
+                wall_time=float(document.get("wall_time", 0.0)),
+            )
+        record = document.get("batch", {})
+        return cls(
+            document["id"],
+            OutcomeStatus.PLANNED,
+            stop=record.get("status"),
+            J=document.get("J"),
+            te=document.get("duration"),
+            iterations=record.get("iterations"),
+            wall_time=float(record.get("wall_time", 0.0)),
+            warnings=tuple(record.get("warnings", ())),
+        )
+
     def row(self) -> dict[str, str]:
         """Its line of ``summary.csv``."""
         planned = self.status == OutcomeStatus.PLANNED

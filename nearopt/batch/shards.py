@@ -268,24 +268,7 @@ def read_shard(path: Path, cut: bool = False) -> list[tuple[str, ...]]:
 def _document_row(document: dict[str, Any], shard: str) -> tuple[str, ...]:
     """The summary row of a motion's document as a shard holds it."""
     digest = request_digest(json.dumps(document.get("request"), sort_keys=True))
-    if "error" in document:
-        outcome = MotionOutcome(
-            document["id"],
-            OutcomeStatus.FAILED,
-            error=str(document["error"]),
-            wall_time=float(document.get("wall_time", 0.0)),
-        )
-    else:
-        record = document.get("batch", {})
-        outcome = MotionOutcome(
-            document["id"],
-            OutcomeStatus.PLANNED,
-            stop=record.get("status"),
-            J=document.get("J"),
-            te=document.get("duration"),
-            iterations=record.get("iterations"),
-            wall_time=float(record.get("wall_time", 0.0)),
-        )
+    outcome = MotionOutcome.from_document(document, "error" not in document)
     return _row(outcome, digest, shard)
 
 
