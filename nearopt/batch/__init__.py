@@ -63,6 +63,7 @@ from .pools import (
     Pool,
     check_main_guard,
     pool_for,
+    pool_in_use,
     probe_scheduler,
 )
 from .shards import SHARD_FIELDS, SHARDS_FROM, MotionsFile, run_sharded
@@ -96,6 +97,7 @@ __all__ = [
     "refuse_inputs",
     "run_files",
     "pool_for",
+    "pool_in_use",
 ]
 
 
@@ -149,16 +151,9 @@ def plan_many(
     requests = _requests(requests)
     order = {r.id: k for k, r in enumerate(requests)}
     outcomes: list[MotionOutcome | None] = [None] * len(requests)
-    pool = pool_for(client, workers)
-    own = pool is not client
-    aborted = True
-    try:
+    with pool_in_use(client, workers) as pool:
         for outcome in pool.run(requests, rate, keep_result=True):
             outcomes[order[outcome.id]] = outcome
-        aborted = False
-    finally:
-        if own:
-            pool.close(abort=aborted)
     return outcomes  # type: ignore[return-value]
 
 
@@ -202,7 +197,6 @@ def run_batch(
         A bad motions file or option, a folder of the other layout, a folder another batch is
         writing, an unreachable scheduler: before anything is planned.
     """
-
     t0 = time.perf_counter()
     check_rate(rate)
     layout = _layout_value(layout)
@@ -219,18 +213,14 @@ def run_batch(
     try:
         where = client if cluster is None else cluster
         if layout == Layout.FILES:
-            listed = list(motions) if motions.path is not None else list(motions.requests)
-            return run_files(listed, out, where, workers, rate, retry_failed, progress, t0, ros_bag)
+            requests = list(motions)
+            return run_files(
+                requests, out, where, workers, rate, retry_failed, progress, t0, ros_bag
+            )
         folder = make_folder(out, "the motions")
         refuse_inputs(folder, [], motions.path)
-        pool = pool_for(where, workers)
-        own, aborted = pool is not where, True
-        try:
+        with pool_in_use(where, workers) as pool:
             summary = run_sharded(motions, folder, pool, rate, retry_failed, progress, ros_bag)
-            aborted = False
-        finally:
-            if own:
-                pool.close(abort=aborted)
         return replace(summary, wall_time=time.perf_counter() - t0, layout=Layout.SHARDS)
     finally:
         if cluster is not None:
@@ -255,7 +245,6 @@ def _layout_of(folder: Path, layout: Layout, count: int) -> Layout:
     ConfigurationError
         A folder of the other layout.
     """
-
     found = None
     try:
         with (folder / "summary.csv").open(encoding="utf-8") as stream:

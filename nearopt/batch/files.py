@@ -30,7 +30,7 @@ from .motions import (
     OutcomeStatus,
 )
 from .pools import (
-    pool_for,
+    pool_in_use,
 )
 
 
@@ -58,10 +58,7 @@ def run_files(
     _write_summary(folder, requests, outcomes)
     total, started = len(requests), time.perf_counter()
     if todo:
-        pool = pool_for(client, workers)
-        own = pool is not client
-        aborted = True
-        try:
+        with pool_in_use(client, workers) as pool:
             finished = 0
             for outcome in pool.run(todo, rate, keep_result=False, ros_bag=ros_bag):
                 planned = outcome.status == OutcomeStatus.PLANNED
@@ -89,10 +86,6 @@ def run_files(
                     eta = elapsed / finished * left
                     failed = sum(o.status == OutcomeStatus.FAILED for o in outcomes.values())
                     progress(len(outcomes), failed, min(pool.workers, left), total, eta)
-            aborted = False
-        finally:
-            if own:
-                pool.close(abort=aborted)
     return BatchSummary(
         tuple(outcomes[r.id] for r in requests if r.id in outcomes),
         skipped,

@@ -195,6 +195,9 @@ class MotionOutcome:
     document: str = field(default="", repr=False)
     result: PlanResult | TaskResult | None = field(default=None, repr=False)
     bag: BagContents | None = field(default=None, repr=False)
+    fingerprint: str = field(default="", repr=False)
+    """The request's :meth:`MotionRequest.fingerprint` at the batch's rate (set by
+    :func:`plan_request`)."""
 
     @classmethod
     def from_document(cls, document: Mapping[str, Any], planned: bool) -> MotionOutcome:
@@ -245,6 +248,7 @@ def plan_request(
     """
     from ..export import json_text
 
+    fingerprint = request.fingerprint(rate)
     t0 = time.perf_counter()
     try:
         outcome = run(request.plan_request(rate), robot_loader=_cached_robot)
@@ -259,7 +263,7 @@ def plan_request(
                 outcome.prepared.request.rate,
                 extra={
                     "id": request.id,
-                    "request": json.loads(request.fingerprint(rate)),
+                    "request": json.loads(fingerprint),
                     "batch": {
                         "status": str(result.status),
                         "iterations": iterations,
@@ -283,13 +287,18 @@ def plan_request(
         document = json.dumps(
             {
                 "id": request.id,
-                "request": json.loads(request.fingerprint(rate)),
+                "request": json.loads(fingerprint),
                 "error": error,
                 "wall_time": wall,
             }
         )
         return MotionOutcome(
-            request.id, OutcomeStatus.FAILED, error=error, wall_time=wall, document=document
+            request.id,
+            OutcomeStatus.FAILED,
+            error=error,
+            wall_time=wall,
+            document=document,
+            fingerprint=fingerprint,
         )
     return MotionOutcome(
         request.id,
@@ -303,6 +312,7 @@ def plan_request(
         document=text,
         result=result if keep_result else None,
         bag=bag,
+        fingerprint=fingerprint,
     )
 
 

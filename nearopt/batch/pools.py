@@ -421,3 +421,19 @@ def pool_for(client: object | None, workers: int | None) -> Pool:
             f"{type(client).__name__} {client!r:.60}"
         )
     return DaskPool(client)
+
+
+@contextlib.contextmanager
+def pool_in_use(client: object | None, workers: int | None) -> Iterator[Pool]:
+    """:func:`pool_for` for a block; a pool made here is closed after it: at once, its workers
+    stopped, if the block ends by an exception (Ctrl-C), else when its tasks are done."""
+    pool = pool_for(client, workers)
+    if pool is client:
+        yield pool
+        return
+    aborted = True
+    try:
+        yield pool
+        aborted = False
+    finally:
+        pool.close(abort=aborted)

@@ -229,7 +229,7 @@ def plan_chunk(chunk: Chunk, folder: str, rate: float, ros_bag: bool = False) ->
                     replace_folder(Path(folder) / "bags" / request.id, outcome.bag.files)
                 stream.write(outcome.document + "\n")
                 stream.flush()  # a worker killed now keeps it: the kernel holds the bytes
-                digest = request_digest(request.fingerprint(rate))
+                digest = request_digest(outcome.fingerprint)
                 rows.append(_row(outcome, digest, final.name))
                 seconds += outcome.wall_time
                 planned += 1
@@ -644,14 +644,15 @@ class _Run:
         """Record a motion whose worker died ``attempts`` times as failed, in a shard of its own."""
         outcome = worker_died(request, attempts)
         document = json.loads(outcome.document)
-        document["request"] = json.loads(request.fingerprint(self.rate))
+        fingerprint = request.fingerprint(self.rate)
+        document["request"] = json.loads(fingerprint)
         self.serial += 1
         name = f"{self.prefix}-{self.serial:06d}.jsonl"
         path = self.folder / "shards" / name
         tmp = path.with_suffix(".part")
         tmp.write_text(json.dumps(document) + "\n", encoding="utf-8")
         os.replace(tmp, path)
-        row = _row(outcome, request_digest(request.fingerprint(self.rate)), name)
+        row = _row(outcome, request_digest(fingerprint), name)
         self.index.append([row])
         self.counts.add([row])
 
