@@ -174,6 +174,9 @@ def verify(
     collisions: CollisionModel | None = None,
     goal_pose: ToolPose | None = None,
     waypoints: tuple[Waypoint, ...] | list[Waypoint] = (),
+    qd0: ArrayLike | None = None,
+    qde: ArrayLike | None = None,
+    duration: float | None = None,
 ) -> VerificationReport:
     """Check a motion at a controller rate, from the robot model alone.
 
@@ -227,6 +230,11 @@ def verify(
     collisions
         Check the signed distance of every pair of this model at every sample against its margin
         (the report gives the closest pair, its distance and when) [m].
+    qd0, qde
+        Expected θ̇(0) and θ̇(t_e) [rad/s] (to ``end_tolerance``; the simulated end speed to ten
+        times ``simulation_tolerance``); default: at rest.
+    duration
+        Expected t_e [s], to 1e-9 relative; default: any.
 
     Raises
     ------
@@ -260,13 +268,17 @@ def verify(
         checks.append(_goal_pose_check(robot, ends, goal_pose, tol))
     if waypoints:
         _check_waypoints(checks, trajectory, robot, waypoints, end_tolerance)
-    checks.append(_rest_check(robot, ends, tol))
+    v0 = np.zeros(robot.n) if qd0 is None else _velocity(robot, qd0, "qd0")
+    ve = np.zeros(robot.n) if qde is None else _velocity(robot, qde, "qde")
+    checks.append(_rest_check(robot, ends, tol, v0, ve))
+    if duration is not None:
+        checks.append(_duration_check(trajectory, duration))
     if clearance is not None:
         checks.append(clearance)
     if cost is not None and J is not None:
         checks.append(_cost_check(robot, trajectory, pool, cost, J, rate, tol))
     if simulate:
-        checks += _simulation_checks(robot, trajectory, goal, tol)
+        checks += _simulation_checks(robot, trajectory, goal, tol, ve)
     return VerificationReport(tuple(checks), float(rate), count)
 
 
@@ -608,15 +620,44 @@ def _goal_pose_check(robot: Robot, motion: _Sampled, goal_pose: ToolPose, tol: T
     )
 
 
-def _rest_check(robot: Robot, motion: _Sampled, tol: Tolerances) -> Check:
-    rest = np.abs(motion.qd[[0, -1]])
+def _rest_check(robot: Robot, motion: _Sampled, tol: Tolerances, v0: NDArray, ve: NDArray) -> Check:
+    """θ̇ at both ends against v0 and ve (at rest: both 0)."""
+    rest = np.abs(motion.qd[[0, -1]] - np.stack([v0, ve]))
     k, i = np.unravel_index(np.argmax(rest), rest.shape)
+    moving = bool(np.any(v0) or np.any(ve))
     return Check(
-        "rest at both ends",
+        "end velocities" if moving else "rest at both ends",
         float(rest[k, i]),
         tol.end,
         "rad/s",
         f"at the {'start' if k == 0 else 'goal'}, joint {robot.joint_names[i]!r}",
+    )
+
+
+def _velocity(robot: Robot, value: ArrayLike, name: str) -> NDArray:
+    """A joint velocity of the robot's length as floats; ConfigurationError else."""
+    try:
+        v = np.asarray(value, dtype=float)
+    except (TypeError, ValueError):
+        raise ConfigurationError(f"{name} must be {robot.n} joint velocities [rad/s]") from None
+    if v.shape != (robot.n,) or not np.all(np.isfinite(v)):
+        raise ConfigurationError(
+            f"{name} must be {robot.n} finite joint velocities [rad/s], got {v.tolist()!r:.80}"
+        )
+    return v
+
+
+def _duration_check(trajectory: Motion, duration: object) -> Check:
+    """t_e against the duration asked for (relative)."""
+    if not is_number(duration) or not float(duration) > 0.0:
+        raise ConfigurationError(f"duration must be a positive number of seconds, got {duration!r}")
+    t = float(duration)
+    return Check(
+        "duration",
+        abs(trajectory.duration - t) / t,
+        1e-9,
+        "relative",
+        f"t_e = {trajectory.duration:.12g} s against {t:.12g} s",
     )
 
 
@@ -660,7 +701,7 @@ def _cost_check(
 
 
 def _simulation_checks(
-    robot: Robot, trajectory: Motion, goal: NDArray, tol: Tolerances
+    robot: Robot, trajectory: Motion, goal: NDArray, tol: Tolerances, ve: NDArray
 ) -> list[Check]:
     """Where u(t), integrated with ABA window by window, takes the arm."""
     n = robot.n
@@ -676,7 +717,7 @@ def _simulation_checks(
         ),
         Check(
             "simulated end speed",
-            float(np.max(np.abs(x_end[n:]))),
+            float(np.max(np.abs(x_end[n:] - ve))),
             10 * tol.simulation,
             "rad/s",
             what,

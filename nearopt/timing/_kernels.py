@@ -64,6 +64,7 @@ def iterate(
     e_const,
     e_w,
     ds,
+    ends,
     scale,
     f_scale,
     tolerance,
@@ -103,7 +104,7 @@ def iterate(
     q = np.zeros((6, big_n))  # the energy term per segment: q, q_l, q_r, q_ll, q_rr, q_lr
     f_total = 0.0
     for it in range(iterations):
-        _at(z, b, lam, hinv, croot, hdiag, rd, rd_size, rhs, hoff, q)
+        _at(z, ends, b, lam, hinv, croot, hdiag, rd, rd_size, rhs, hoff, q)
         _energy_sums(e_left, e_cl, e_cr, e_d, e_node, e_const, e_w, b, lam, hinv, croot, q)
         f_total = _objective(ds, lam, hinv, croot, q, f_scale, rd, rd_size, hdiag, hoff)
         gap, rp_max = _rows(
@@ -133,9 +134,14 @@ def iterate(
 
 
 @inline_jit(fastmath=FAST, error_model="numpy")
-def _at(z, b, lam, hinv, croot, hdiag, rd, rd_size, rhs, hoff, q):  # pragma: no cover
-    """b, λ = √b, 1/(2λ) and −1/(4λ³) at the knots from z; the sums of an iteration zeroed."""
+def _at(z, ends, b, lam, hinv, croot, hdiag, rd, rd_size, rhs, hoff, q):  # pragma: no cover
+    """b, λ = √b, 1/(2λ) and −1/(4λ³) at the knots from z and the fixed ends (b_0, b_N: their
+    derivatives stay 0, they are not variables); the sums of an iteration zeroed."""
     big_n = hoff.size
+    b[0] = ends[0]
+    lam[0] = np.sqrt(ends[0])
+    b[big_n] = ends[1]
+    lam[big_n] = np.sqrt(ends[1])
     for k in range(1, big_n):
         b[k] = z[k - 1]
         lam[k] = np.sqrt(z[k - 1])

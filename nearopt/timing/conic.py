@@ -70,6 +70,8 @@ def solve_conic(
     torque_limits: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
     tolerance: float = 1e-9,
     time_limit: float = np.inf,
+    b_ends: tuple[float, float] = (0.0, 0.0),
+    max_duration: float | None = None,
 ) -> ConicSolution:
     """Solve the SOCP of this module's docstring.
 
@@ -98,6 +100,11 @@ def solve_conic(
         Clarabel's gap and feasibility tolerances.
     time_limit
         Clarabel's time limit [s].
+    b_ends
+        The fixed b_0 and b_N (0 at rest): their √b enter y_0 and y_{N−1} as constants (the
+        rows' terms in them are in ``rows`` and ``torque`` already).
+    max_duration
+        t_e = Σ t_k ≤ this [s] (t_k ≥ the segment's time), or None.
     """
     import clarabel
 
@@ -113,15 +120,19 @@ def solve_conic(
     pb = _Builder(big_n)
     _linear_block(pb, clarabel, at, rows, z_upper, p_bounds, torque_limits)
     _root_block(pb, clarabel, at)
-    _time_block(pb, clarabel, at, ds)
+    roots = np.sqrt(np.asarray(b_ends, dtype=float))
+    _time_block(pb, clarabel, at, ds, roots)
     q_vec = np.zeros(at.nx)
     q_vec[at.it : at.it + big_n] = 1.0
     if energy:
-        _energy_block(pb, clarabel, at, ds, weights, torque, n)
+        _energy_block(pb, clarabel, at, ds, weights, torque, n, roots)
         q_vec[at.ie : at.ie + big_n] = 1.0
     else:  # no energy: pin e = 0
         pb.put(np.arange(big_n), at.ie + pb.seg, np.ones(big_n))
         pb.close(np.zeros(big_n), [clarabel.ZeroConeT(big_n)], big_n)
+    if max_duration is not None:  # Σ t_k ≤ T
+        pb.put(np.zeros(big_n), at.it + pb.seg, np.ones(big_n))
+        pb.close(np.array([float(max_duration)]), [clarabel.NonnegativeConeT(1)], 1)
     if at.nv:  # v = T (z, p) + u0 ⇔ T (z, p) − v = −u0
         tt = sp.coo_matrix(torque[0])
         pb.put(tt.row, tt.col, tt.data)
@@ -276,15 +287,27 @@ def _root_block(pb: _Builder, clarabel: object, at: _Columns) -> None:
     pb.close(np.tile([1.0, 0.0, -1.0], nz), [clarabel.SecondOrderConeT(3)] * nz, 3 * nz)
 
 
-def _time_block(pb: _Builder, clarabel: object, at: _Columns, ds: NDArray[np.float64]) -> None:
+def _time_block(
+    pb: _Builder,
+    clarabel: object,
+    at: _Columns,
+    ds: NDArray[np.float64],
+    roots: NDArray[np.float64],
+) -> None:
     """3. t_k y_k ≥ 2Δσ_k ⇔ ‖(2√(2Δσ_k), t_k − y_k)‖ ≤ t_k + y_k."""
     big_n = ds.size
     pb.cone_xy(3, at.it, at.ic)
-    pb.close(
-        np.column_stack([np.zeros(big_n), 2.0 * np.sqrt(2.0 * ds), np.zeros(big_n)]).ravel(),
-        [clarabel.SecondOrderConeT(3)] * big_n,
-        3 * big_n,
-    )
+    rhs = np.column_stack([np.zeros(big_n), 2.0 * np.sqrt(2.0 * ds), np.zeros(big_n)])
+    _root_ends(rhs, roots)
+    pb.close(rhs.ravel(), [clarabel.SecondOrderConeT(3)] * big_n, 3 * big_n)
+
+
+def _root_ends(rhs: NDArray[np.float64], roots: NDArray[np.float64]) -> None:
+    """The fixed √b_0 and √b_N in y_0 and y_{N−1} of the cones ‖(…, x − y)‖ ≤ x + y whose
+    right-hand sides are ``rhs`` (one row per segment): + in the first entry, − in the last."""
+    for k, root in ((0, roots[0]), (-1, roots[1])):
+        rhs[k, 0] += root
+        rhs[k, -1] -= root
 
 
 def _energy_block(
@@ -295,6 +318,7 @@ def _energy_block(
     weights: NDArray[np.float64],
     torque: tuple[sp.spmatrix, NDArray[np.float64]],
     n: int,
+    roots: NDArray[np.float64],
 ) -> None:
     """4. e_k y_k ≥ Δσ_k Σ w (u_{k+}² + u_{(k+1)-}²) ⇔ ‖(2v, e_k − y_k)‖ ≤ e_k + y_k,
     v = √(Δσ w) u."""
@@ -315,4 +339,5 @@ def _energy_block(
         slot = np.where(r < big_n, joint, n + joint)
         pb.put(width * k_of + 1 + slot, tt.col, -2.0 * np.sqrt(ds[k_of] * weights[joint]) * tt.data)
         e_rhs[k_all, 1 + slot_all] = scale_all * torque[1]
+    _root_ends(e_rhs, roots)
     pb.close(e_rhs.ravel(), [clarabel.SecondOrderConeT(width)] * big_n, width * big_n)

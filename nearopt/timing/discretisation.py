@@ -3,7 +3,8 @@
 Notation: knots σ_0 = 0 < … < σ_N = 1, b_k = λ(σ_k)², segment k = [σ_k, σ_{k+1}] with the constant
 path acceleration a_k = (b_{k+1} − b_k) / (2Δσ_k). Samples r = 0 … 2N−1: sample r < N is the start
 of segment r (knot r), sample r ≥ N the end of segment r − N (knot r − N + 1); ``node[r]`` and
-``seg[r]`` say which. The free variables are z = (b_1 … b_{N−1}); b_0 = b_N = 0 (rest).
+``seg[r]`` say which. The free variables are z = (b_1 … b_{N−1}); b_0 and b_N are fixed
+(``problem.b_ends``: 0 at rest).
 
 :class:`Discretisation` turns a :class:`~nearopt.timing.TimingProblem` into rows
 
@@ -216,7 +217,7 @@ class Discretisation:
                 keep = np.zeros(inside.size, dtype=bool)
                 keep[order[first]] = True
                 k = self.problem.interior_speed.segment[self.location[inside]]
-                ends = np.concatenate([[0.0], cap, [0.0]])  # b_0 = b_N = 0
+                ends = self.problem.with_ends(cap)
                 keep &= bound < np.maximum(ends[k], ends[k + 1])
         self.solver_index = np.concatenate([np.arange(self.blocks.speed.start), inside[keep]])
 
@@ -242,7 +243,7 @@ class Discretisation:
                 self.offset[sample_rows],
                 self.lower[sample_rows],
                 self.upper[sample_rows],
-                np.concatenate([[0.0], self.z_cap, [0.0]]),
+                p.with_ends(self.z_cap),
             )
             blocks = [
                 lambda: self._between(p.torque, inside.torque, polygon),
@@ -395,7 +396,7 @@ class Discretisation:
         np.minimum.at(knot_bound, np.arange(big_n), bound[:, 0])
         np.minimum.at(knot_bound, np.arange(1, big_n + 1), bound[:, -1])
         self.z_cap = np.minimum(self.z_cap, knot_bound[1:-1])
-        cap = np.concatenate([[0.0], self.z_cap, [0.0]])
+        cap = p.with_ends(self.z_cap)
         w = np.arange(1, points + 1) / (points + 1)
         inner = bound[:, 1:-1]
         keep = inner < (1.0 - w) * cap[:-1, None] + w * cap[1:, None]
@@ -454,9 +455,11 @@ class Discretisation:
             margin = np.minimum(margin, np.maximum(0.9 * room, 0.0))
         slope = coef.m[chosen][:, limited] / (2.0 * self.ds[k])[:, None]
         curv = coef.c[chosen][:, limited]
-        # √b at a point: exact in the end segments (one knot at rest), else at the nearer knot
-        node = np.where(k == 0, 1, np.where(k == big_n - 1, big_n - 1, np.where(w < 0.5, k, k + 1)))
-        root = np.where(k == 0, np.sqrt(w), np.where(k == big_n - 1, np.sqrt(1.0 - w), 1.0))
+        # √b at a point: exact in an end segment whose end is at rest, else at the nearer knot
+        first = (k == 0) & (p.b_ends[0] == 0.0)
+        last = (k == big_n - 1) & (p.b_ends[1] == 0.0)
+        node = np.where(first, 1, np.where(last, big_n - 1, np.where(w < 0.5, k, k + 1)))
+        root = np.where(first, np.sqrt(w), np.where(last, np.sqrt(1.0 - w), 1.0))
         count = k.size
         joints = limited.size
         return (
@@ -537,7 +540,7 @@ class Discretisation:
         p = self.problem
         knots = np.arange(p.segments + 1)
         keep = np.zeros(p.dtheta.shape, dtype=bool)
-        keep[1:-1] = True  # b_0 = b_N = 0
+        keep[1:-1] = True  # b_0 and b_N are fixed (the caller checks their speeds)
         ones = np.ones(knots.size)
         return self._speed_rows(knots, (ones, 0.0 * ones), p.dtheta, keep)
 
@@ -554,7 +557,7 @@ class Discretisation:
     # ---------------------------------------------------------------- evaluating
     def b(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """b at every knot from the free ones, shape (N+1,)."""
-        return np.concatenate([[0.0], z, [0.0]])
+        return self.problem.with_ends(z)
 
     def values(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
         """Every row's value A b + d √b + offset, shape (R,)."""
@@ -602,12 +605,21 @@ class Discretisation:
     def linear_rows(self, z_lin: NDArray[np.float64] | None) -> LinearRows:
         """The rows as ``lower ≤ M z ≤ upper``, the damping d√b replaced by its tangent at
         ``z_lin`` (exact there), or dropped when ``z_lin`` is None."""
-        matrix, const = self._free, self.offset.copy()
+        matrix, const = self._free, self.offset + self._ends_terms()
         if self.has_damping and z_lin is not None:
             jac, value = self._sqrt_tangent(z_lin)
             matrix = (matrix + jac).tocsc()
             const = const + value - jac @ z_lin
         return LinearRows(matrix.tocsr(), self.lower - const, self.upper - const)
+
+    def _ends_terms(self) -> NDArray[np.float64]:
+        """Every row's terms in the fixed b_0 and b_N (0 at rest): A's first and last columns
+        times them (the damping's d√b there is among :meth:`_sqrt_tangent`'s values)."""
+        p = self.problem
+        if p.at_rest:
+            return np.zeros(self.offset.size)
+        ends = self.matrix[:, [0, -1]] @ np.asarray(p.b_ends, dtype=float)
+        return np.asarray(ends).ravel()
 
     def solver_rows(
         self, z_lin: NDArray[np.float64] | None

@@ -172,7 +172,7 @@ def _without_implied(
     order = grouped[np.argsort(sample[grouped], kind="stable")]
     starts = np.concatenate([[0], np.flatnonzero(np.diff(sample[order])) + 1, [order.size]])
     node = disc.node[sample]
-    cap_b = np.concatenate([[0.0], cap, [0.0]])
+    cap_b = disc.problem.with_ends(cap)
     drop, b_max = redundant_rows(
         order,
         starts,
@@ -285,9 +285,15 @@ def solve_interior(
         np.concatenate([rows.const, np.zeros(big_n - 1)]),
     )
     m = rows.left.size
-    s = -rows.values(np.concatenate([[0.0], z, [0.0]]), np.sqrt(np.concatenate([[0.0], z, [0.0]])))
-    if np.any(s <= 0.0):
+    b_start = problem.with_ends(z)
+    s = -rows.values(b_start, np.sqrt(b_start))
+    if problem.at_rest and np.any(s <= 0.0):
         return InteriorSolution(z, False, 0, "the start is not strictly feasible")
+    if not problem.at_rest:
+        # moving ends: the start need not hold every row (those of the end segments, say); the
+        # method is an infeasible-start one in the rows (residual c + s → 0), so those start
+        # with a slack of the order of the others'
+        s = np.where(s > 1e-3, s, 0.1)
     f_scale = 1.0 / disc.torque_cost(z, weights)
     y = (1.0 / m) / s  # centred, with a duality gap of the order of F (scaled to 1)
     args = (
@@ -295,6 +301,7 @@ def solve_interior(
         *_kernel_rows(e_rows[:6]),
         e_rows[6],
         ds,
+        np.array(problem.b_ends, dtype=float),
         scale,
         f_scale,
         tolerance,

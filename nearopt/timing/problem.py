@@ -6,7 +6,7 @@ as plain arrays, everything the timing kernel needs (no robot model beyond this 
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -35,6 +35,7 @@ __all__ = [
     "safe_limits",
     "check_gravity",
     "grid_knots",
+    "with_moving_ends",
 ]
 
 MAX_GRID = 100_000  # segments; stage 1's memory grows linearly beyond any use
@@ -159,6 +160,9 @@ class TimingProblem:
     interior
         Points inside the segments where the torque (and acceleration) rows are imposed too, so
         that one solve mostly holds the limits between the samples; None: at the samples only.
+    b_ends
+        b = (dσ/dt)² at σ = 0 and σ = 1 [1/s²], fixed: (0, 0) at rest (the paper's case), else
+        the path speed of a motion that starts or ends moving (θ̇ = θ'·√b there).
     """
 
     sigma: NDArray[np.float64]
@@ -172,6 +176,7 @@ class TimingProblem:
     interior_speed: InteriorSpeed | None = None
     b_upper: NDArray[np.float64] | None = None
     interior: InteriorSamples | None = None
+    b_ends: tuple[float, float] = (0.0, 0.0)
 
     @property
     def segments(self) -> int:
@@ -182,6 +187,15 @@ class TimingProblem:
     def dof(self) -> int:
         """n, the number of joints."""
         return self.theta.shape[1]
+
+    @property
+    def at_rest(self) -> bool:
+        """Whether the motion starts and ends at rest (b_0 = b_N = 0)."""
+        return self.b_ends[0] == 0.0 and self.b_ends[1] == 0.0
+
+    def with_ends(self, z: NDArray[np.float64]) -> NDArray[np.float64]:
+        """b at every knot from the free knots' z = b_1 … b_{N−1}, shape (N+1,)."""
+        return np.concatenate([[self.b_ends[0]], z, [self.b_ends[1]]])
 
     @property
     def quantities(self) -> tuple[PathQuantity, ...]:
@@ -380,3 +394,66 @@ def grid_knots(segments: int, breakpoints: ArrayLike = ()) -> NDArray[np.float64
     sigma = 0.5 * (1.0 - np.cos(np.pi * x))
     sigma[np.cumsum(share)[:-1]] = sigma_break  # the breakpoints exactly, not via cos(arccos(·))
     return sigma
+
+
+def with_moving_ends(
+    problem: TimingProblem,
+    qd0: ArrayLike | None = None,
+    qde: ArrayLike | None = None,
+    *,
+    tolerance: float = 1e-8,
+) -> TimingProblem:
+    """``problem`` starting with the joint velocity ``qd0`` and ending with ``qde`` (None or 0:
+    at rest) [rad/s or m/s, shape (n,)].
+
+    A moving end's velocity must point along the path there: θ̇ = θ'(σ)·√b, so b_0 =
+    (qd0·θ'_0 / |θ'_0|²)² and qd0 − √b_0 θ'_0 must vanish (to ``tolerance`` relative to |qd0|);
+    and it must be within the joint speed limits the problem enforces.
+
+    Raises
+    ------
+    ConfigurationError
+        Naming the joint: a velocity of the wrong shape or not finite, beyond a speed limit,
+        across or against the path's direction, or on a path that does not move there.
+    """
+    ends = []
+    for name, qd, k, word in (("qd0", qd0, 0, "start"), ("qde", qde, -1, "end")):
+        if qd is None:
+            ends.append(0.0)
+            continue
+        qd = np.asarray(qd, dtype=float)
+        if qd.shape != (problem.dof,) or not np.all(np.isfinite(qd)):
+            raise ConfigurationError(
+                f"{name} must be {problem.dof} finite joint velocities, got {qd.tolist()!r}"
+            )
+        names = problem.joint_names
+        over = np.abs(qd) - problem.velocity
+        if np.any(over > 0.0):
+            i = int(np.argmax(over))
+            raise ConfigurationError(
+                f"{name} of joint {names[i]} is {qd[i]:.6g} rad/s: beyond its speed limit "
+                f"{problem.velocity[i]:.6g} rad/s"
+            )
+        tangent = problem.dtheta[k]
+        size = float(np.max(np.abs(qd)))
+        if size == 0.0:
+            ends.append(0.0)
+            continue
+        lam = float(qd @ tangent) / float(tangent @ tangent) if np.any(tangent) else 0.0
+        across = np.abs(qd - lam * tangent)
+        if lam <= 0.0 or np.max(across) > tolerance * size:
+            if not np.any(tangent):
+                along = "does not move there"
+            elif np.max(across) > tolerance * size:
+                along = "points elsewhere"
+            else:
+                along = "goes the other way"
+            lam = max(lam, 0.0)
+            i = int(np.argmax(np.abs(qd - lam * tangent)))
+            raise ConfigurationError(
+                f"{name} must point along the path at its {word}, and the path {along}: "
+                f"joint {names[i]} would move at {qd[i]:.6g} rad/s where the path's direction "
+                f"gives {lam * tangent[i] + 0.0:.6g} rad/s (θ̇ = θ'(s)·ṡ)"
+            )
+        ends.append(lam * lam)
+    return replace(problem, b_ends=(ends[0], ends[1]))

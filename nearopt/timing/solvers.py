@@ -22,7 +22,7 @@ import scipy.sparse as sp
 from scipy.optimize import Bounds, LinearConstraint, NonlinearConstraint, minimize
 
 from ..cost import Cost, TimeCost, TorqueCost
-from ..errors import ConfigurationError, SolverError
+from ..errors import ConfigurationError, InfeasiblePathError, SolverError
 from .conic import is_solved, solve_conic
 from .discretisation import Discretisation
 from .interior import solve_interior
@@ -103,6 +103,7 @@ def solve_timing(
     time_limit: float = np.inf,
     guess: NDArray[np.float64] | None = None,
     method: TimingMethod | None = None,
+    max_duration: float | None = None,
 ) -> TimingSolution:
     """Solve stage 1 on a grid (the kernel: arrays in, b out).
 
@@ -128,6 +129,10 @@ def solve_timing(
         The back end of the built-in costs (and of the convex start of any other cost):
         ``TimingMethod.INTERIOR`` or ``TimingMethod.SOCP`` (Clarabel, the independent
         reference); default: the interior-point kernel, and Clarabel where it reports a failure.
+    max_duration
+        t_e ≤ this [s] as a constraint of Clarabel's SOCP (``method=TimingMethod.SOCP`` only:
+        the reference of :func:`~nearopt.timing.optimal_timing`'s ``max_duration``, which
+        searches over the cost's weights with the kernel instead).
 
     Raises
     ------
@@ -148,6 +153,16 @@ def solve_timing(
         raise ConfigurationError(
             f"method must be a TimingMethod of a convex solver (INTERIOR or SOCP), got {method!r}"
         )
+    if max_duration is not None and (
+        method != TimingMethod.SOCP or not isinstance(cost, TorqueCost)
+    ):
+        raise ConfigurationError(
+            "solve_timing takes max_duration with method=TimingMethod.SOCP and a TimeCost or "
+            "TorqueCost (the reference); optimal_timing(…, max_duration=) solves it otherwise"
+        )
+    if max_duration is not None:
+        weights = cost.torque_weights(problem.dof)
+        return _solve_convex(disc, cost, weights, tolerance, time_limit, None, max_duration)
     if isinstance(cost, TorqueCost):
         weights = cost.torque_weights(problem.dof)
         return _solve_builtin(disc, cost, weights, tolerance, deadline, guess, time_limit, method)
@@ -203,6 +218,8 @@ def _solve_builtin(
     except SolverError as exc:
         if exc.status == "MaxTime":
             raise out_of_time(disc.problem, time_limit) from None
+        if not disc.problem.at_rest and "Infeasible" in str(exc.status):
+            raise moving_ends_infeasible(disc) from None
         raise
     return dataclasses.replace(reference, message=reference.message + note)
 
@@ -223,6 +240,7 @@ def _solve_convex(
     tolerance: float,
     time_limit: float = np.inf,
     z_guess: NDArray[np.float64] | None = None,
+    max_duration: float | None = None,
 ) -> TimingSolution:
     """f0 = 1 + Σ w u²: the SOCP, repeated with the damping re-linearised until a fixed point.
 
@@ -250,6 +268,8 @@ def _solve_convex(
                 z_upper,
                 tolerance=tol,
                 time_limit=deadline - time.perf_counter(),
+                b_ends=disc.problem.b_ends,
+                max_duration=max_duration,
             )
             if str(sol.status) == "MaxTime":  # no use re-linearising an unfinished answer
                 raise out_of_time(disc.problem, time_limit)
@@ -428,9 +448,12 @@ def into_limits(disc: Discretisation, z: NDArray[np.float64]) -> tuple[NDArray[n
     """αb with the largest α ≤ 1 that puts every row within its limits, and α.
 
     Every row is monotone along αb from α = 0, where it holds (torque g inside the limits after
-    :func:`~nearopt.timing.check_gravity`, zero accelerations and speeds).
+    :func:`~nearopt.timing.check_gravity`, zero accelerations and speeds). A motion that starts
+    or ends moving has no such ray (b_0 or b_N is fixed): z is returned as it is, α = 1.
     """
     z = np.minimum(z, disc.z_upper)
+    if not disc.problem.at_rest:  # no ray from rest: the solver's answer holds the rows
+        return z, 1.0
     alpha = largest_scale(lambda alpha: disc.excess(alpha * z))
     return alpha * z, alpha
 
@@ -455,3 +478,79 @@ def _tridiagonal_hessian(
         (np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))), shape=(p, p)
     ).tocsr()
     return 0.5 * (hess + hess.T)
+
+
+def moving_ends_infeasible(disc: Discretisation) -> InfeasiblePathError:
+    """Why no timing of a path with moving ends holds the limits: braking as hard as the rows
+    allow from b_0 (forward) and from b_N (backward), the first segment where the rows leave
+    no b, and the row that stops the braking there (its kind and joint). For the message of an
+    infeasible problem only: the damping's √b is taken at the segment's known knot."""
+    p = disc.problem
+    names = p.joint_names
+    kinds = [
+        (disc.blocks.torque, "torque"),
+        (disc.blocks.acceleration, "acceleration"),
+        (disc.blocks.torque_between, "torque"),
+        (disc.blocks.acceleration_between, "acceleration"),
+    ]
+    cap = p.with_ends(disc.z_cap)
+    for end, forward in ((0, True), (1, False)):
+        if p.b_ends[end] == 0.0:
+            continue
+        found = _brake(disc, cap, forward)
+        if found is None:
+            continue
+        k, row = found
+        what = next((word for block, word in kinds if block.start <= row < block.stop), "speed")
+        far = k == (p.segments - 1 if forward else 0)
+        name, verb = ("qd0", "starts") if forward else ("qde", "ends")
+        where = (
+            f"cannot {'reach qde by the end' if forward else 'start from qd0 at the start'} "
+            "of the path"
+            if far
+            else f"finds no feasible speed at σ = {float(p.sigma[k + 1 if forward else k]):.4g}"
+        )
+        return InfeasiblePathError(
+            f"no timing of this path {verb} at {name} within the limits: changing speed as fast "
+            f"as they allow (the {what} limit of joint {names[disc.joint[row]]} binds), the arm "
+            f"{where}; a longer path or a lower {name} would do",
+            joint=names[disc.joint[row]],
+        )
+    return InfeasiblePathError(
+        "no timing of this path holds the limits from its start velocity qd0 to its end "
+        "velocity qde (the path is too short to change speed that much)"
+    )
+
+
+def _brake(disc: Discretisation, cap: NDArray[np.float64], forward: bool) -> tuple[int, int] | None:
+    """The segment and the row where braking from the fixed end first leaves no feasible b
+    (None if it reaches the other end)."""
+    p = disc.problem
+    big_n = p.segments
+    rows = disc.solver_index
+    order = np.argsort(disc.left[rows], kind="stable")
+    rows = rows[order]
+    starts = np.searchsorted(disc.left[rows], np.arange(big_n + 1))
+    b_known = p.b_ends[0] if forward else p.b_ends[1]
+    b_other = p.b_ends[1] if forward else p.b_ends[0]  # fixed at the far end
+    segments = range(big_n) if forward else range(big_n - 1, -1, -1)
+    for k in segments:
+        r = rows[starts[k] : starts[k + 1]]
+        known = disc.coef_left[r] if forward else disc.coef_right[r]
+        coef = disc.coef_right[r] if forward else disc.coef_left[r]
+        rest = known * b_known + disc.sqrt_coef[r] * np.sqrt(b_known) + disc.offset[r]
+        upper, lower = disc.upper[r] - rest, disc.lower[r] - rest
+        with np.errstate(divide="ignore", invalid="ignore"):
+            hi_b = np.where(coef > 0, upper / coef, np.where(coef < 0, lower / coef, np.inf))
+            lo_b = np.where(coef > 0, lower / coef, np.where(coef < 0, upper / coef, -np.inf))
+        hi_b = np.where(np.isnan(hi_b), np.inf, hi_b)
+        lo_b = np.where(np.isnan(lo_b), -np.inf, lo_b)
+        nxt = k + 1 if forward else k
+        high = min(float(np.min(hi_b, initial=np.inf)), float(cap[nxt]))
+        low = max(float(np.max(lo_b, initial=-np.inf)), 0.0)
+        if k == (big_n - 1 if forward else 0):  # the far end's b is fixed
+            low = max(low, b_other)
+        if r.size and low > high * (1.0 + 1e-9) + 1e-300:
+            return k, int(r[np.argmax(lo_b)])
+        b_known = low
+    return None

@@ -1,0 +1,175 @@
+"""Stage 1 of motions that start or end moving, and of motions whose duration is set.
+
+Seeded paths on several arms; every answer against Clarabel's SOCP of the same problem (the fixed
+end speeds and t_e ≤ T as its own constraints: the independent reference) and checked by
+``verify`` (limits at 2 kHz, the end velocities, the duration, J, the forward simulation).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from conftest import load
+
+import nearopt
+from nearopt.path import StraightPath
+from nearopt.timing import TimingMethod, optimal_timing, solve_timing
+from nearopt.trajectory import Trajectory, segment_times
+
+ARMS = ("two_link", "ur5", "panda", "xarm7")  # xarm7: damped joints
+RATE = 2000.0
+
+
+def seeded_path(name: str, seed: int) -> tuple[nearopt.Robot, StraightPath, np.ndarray]:
+    """A straight path within 30 % of each joint's range around its middle, and its direction
+    dθ/ds."""
+    robot = load(name)
+    rng = np.random.default_rng(seed)
+    lo = np.maximum(robot.limits.position_lower, -3.0)
+    hi = np.minimum(robot.limits.position_upper, 3.0)
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    q0 = mid + 0.3 * half * rng.uniform(-1.0, 1.0, robot.n)
+    qe = mid + 0.3 * half * rng.uniform(-1.0, 1.0, robot.n)
+    path = StraightPath(q0, qe)
+    return robot, path, (qe - q0) / path.s_end
+
+
+def peak_path_speed(robot: nearopt.Robot, path: StraightPath) -> float:
+    """The largest ṡ of the time-optimal motion from rest to rest."""
+    fastest = optimal_timing(robot, path)
+    t = np.linspace(0.0, fastest.duration, 400)
+    return float(np.max(fastest.trajectory.path_parameter(t)[1]))
+
+
+def verified(robot, result, q0, qe, **expected) -> None:
+    report = nearopt.verify(
+        result.trajectory, robot, rate=RATE, q0=q0, qe=qe, cost=result.cost, J=result.J, **expected
+    )
+    assert report.passed, str(report)
+
+
+@pytest.mark.parametrize("name", ARMS)
+def test_moving_ends_are_kept_and_the_timing_is_the_references(name: str) -> None:
+    robot, path, direction = seeded_path(name, 5)
+    rng = np.random.default_rng(7)
+    fast = peak_path_speed(robot, path)
+    for cost in (nearopt.TimeCost(), nearopt.TorqueCost(0.03)):
+        f0, fe = rng.uniform(0.1, 0.6, 2)
+        qd0, qde = f0 * fast * direction, fe * fast * direction
+        result = optimal_timing(robot, path, cost, qd0=qd0, qde=qde)
+        states = result.trajectory.states(np.array([0.0, result.duration]))[1]
+        assert np.max(np.abs(states[0] - qd0)) <= 1e-9 * np.max(np.abs(qd0))
+        assert np.max(np.abs(states[1] - qde)) <= 1e-9 * np.max(np.abs(qde))
+        verified(robot, result, path.theta0, path.thetae, qd0=qd0, qde=qde)
+        # the same problem (the grid, the margins stage 1 ended with) by Clarabel
+        reference = solve_timing(result.problem, cost, method=TimingMethod.SOCP)
+        assert result.problem.b_ends == pytest.approx((f0**2 * fast**2, fe**2 * fast**2), 1e-9)
+        if robot.damping is None or not np.any(robot.damping):
+            assert result.objective == pytest.approx(reference.objective, rel=1e-6)
+        else:  # Clarabel's damping is a tangent re-linearised to a fixed point: no better
+            assert result.objective <= reference.objective * (1.0 + 1e-6)
+        # a start that is already moving along the path is never slower than from rest
+        if isinstance(cost, nearopt.TimeCost):
+            from_rest = optimal_timing(robot, path, cost, qde=qde)
+            assert result.duration <= from_rest.duration * (1.0 + 1e-9)
+
+
+@pytest.mark.parametrize("name", ARMS)
+def test_a_duration_is_met_exactly_and_the_optimum_is_the_references(name: str) -> None:
+    """t_e = T to 1e-9 at rest and moving; below the free optimum's t_e, the same J as
+    Clarabel's SOCP with t_e ≤ T as a constraint; J falls as T grows up to the free optimum's
+    t_e and rises beyond it."""
+    robot, path, direction = seeded_path(name, 11)
+    damped = robot.damping is not None and bool(np.any(robot.damping))  # Clarabel linearises
+    cost = nearopt.TorqueCost(0.03)
+    fast = peak_path_speed(robot, path)
+    for ends in ({}, {"qd0": 0.3 * fast * direction, "qde": 0.2 * fast * direction}):
+        free = optimal_timing(robot, path, cost, **ends)
+        fastest = optimal_timing(robot, path, **ends).duration
+        sweep = []
+        for fraction in (0.0, 0.3, 0.7):
+            duration = fastest + fraction * (free.duration - fastest)
+            duration = max(duration, fastest * 1.001)
+            result = optimal_timing(robot, path, cost, duration=duration, **ends)
+            assert result.duration == pytest.approx(duration, rel=1e-9, abs=0.0)
+            verified(robot, result, path.theta0, path.thetae, duration=duration, **ends)
+            if not damped:
+                # Clarabel with Σ t_k ≤ T (1 + 1e-6) (at T itself it may call a problem near
+                # the time-optimal one infeasible); its answer lasts t_ref ≈ T (its tolerance
+                # on that row): nearopt's at t_ref is no worse, and Clarabel's is no worse than
+                # ours at T < t_ref
+                reference = solve_timing(
+                    result.problem, cost, method=TimingMethod.SOCP, max_duration=duration * 1.000001
+                )
+                t_ref = float(np.sum(segment_times(result.problem.sigma, reference.b)))
+                assert t_ref == pytest.approx(duration, rel=2e-5)
+                at_ref = optimal_timing(robot, path, cost, duration=t_ref, **ends)
+                assert at_ref.objective <= reference.objective * (1.0 + 1e-7)
+                if t_ref >= duration:
+                    assert reference.objective <= result.objective * (1.0 + 1e-7)
+            bounded = optimal_timing(robot, path, cost, max_duration=duration, **ends)
+            assert bounded.duration <= duration * (1.0 + 1e-12)
+            assert bounded.J == pytest.approx(result.J, rel=1e-6)
+            sweep.append(result.J)
+        sweep.append(free.J)
+        assert np.all(np.diff(sweep) < 0.0), sweep
+        if not ends:  # beyond the free optimum's t_e (moving ends: see the next test)
+            longer = optimal_timing(robot, path, cost, duration=1.05 * free.duration)
+            assert longer.duration == pytest.approx(1.05 * free.duration, rel=1e-9)
+            assert longer.J > free.J
+        loose = optimal_timing(robot, path, cost, max_duration=1.05 * free.duration, **ends)
+        assert loose.J == pytest.approx(free.J, rel=1e-12)
+
+
+def test_the_time_optimal_cost_at_a_longer_duration_takes_the_least_torque() -> None:
+    """f0 = 1: every timing of duration T has J = T; the one returned holds the limits, lasts T
+    and needs less ∫ Σ u²/U² dt than the time-optimal motion slowed down uniformly to T."""
+    robot, path, _ = seeded_path("ur5", 3)
+    fastest = optimal_timing(robot, path)
+    duration = 1.5 * fastest.duration
+    result = optimal_timing(robot, path, duration=duration)
+    assert result.duration == pytest.approx(duration, rel=1e-9)
+    assert result.J == pytest.approx(duration, rel=1e-9)
+    verified(robot, result, path.theta0, path.thetae, duration=duration)
+    slowed = Trajectory(
+        path,
+        fastest.trajectory.s,
+        fastest.trajectory.b * (fastest.duration / duration) ** 2,
+        robot.inverse_dynamics_batch,
+    )
+    assert slowed.duration == pytest.approx(duration, rel=1e-12)
+    effort = np.maximum(np.abs(robot.limits.effort_lower), np.abs(robot.limits.effort_upper))
+    torque = nearopt.TorqueCost(weights=1.0 / effort**2)
+    assert result.trajectory.integrate(torque) < slowed.integrate(torque)
+
+
+def test_bad_end_velocities_and_durations_are_named() -> None:
+    robot, path, direction = seeded_path("two_link", 2)
+    names = robot.joint_names
+    across = np.array([direction[1], -direction[0]])
+    cases = [
+        ({"qd0": across}, nearopt.ConfigurationError, "points elsewhere"),
+        ({"qde": -0.5 * direction}, nearopt.ConfigurationError, "goes the other way"),
+        ({"qd0": [1.0]}, nearopt.ConfigurationError, "2 finite joint velocities"),
+        ({"qd0": [np.nan, 0.0]}, nearopt.ConfigurationError, "2 finite joint velocities"),
+        ({"qd0": 1e4 * direction}, nearopt.ConfigurationError, "beyond its speed limit"),
+        ({"qd0": 95.0 * direction / np.max(np.abs(direction))}, nearopt.InfeasiblePathError, "qd0"),
+        ({"duration": 1e-3}, nearopt.InfeasiblePathError, "shorter than the time-optimal"),
+        ({"max_duration": 1e-3}, nearopt.InfeasiblePathError, "shorter than the time-optimal"),
+        ({"duration": 1.0, "max_duration": 1.0}, nearopt.ConfigurationError, "not both"),
+        ({"duration": -1.0}, nearopt.ConfigurationError, "positive"),
+        ({"duration": "soon"}, nearopt.ConfigurationError, "seconds"),
+    ]
+    for options, error, words in cases:
+        with pytest.raises(error, match=words) as caught:
+            optimal_timing(robot, path, **options)
+        message = str(caught.value)
+        assert "\n" not in message
+        if words in ("points elsewhere", "goes the other way", "beyond its speed limit", "qd0"):
+            assert any(joint in message for joint in names), message
+    fast = peak_path_speed(robot, path)
+    with pytest.raises(nearopt.InfeasiblePathError, match="longer than any optimum"):
+        optimal_timing(robot, path, qd0=0.5 * fast * direction, duration=100.0)
+    custom = nearopt.CallableCost(lambda q, qd, u: 1.0 + np.sum(u**2, axis=1))
+    with pytest.raises(nearopt.ConfigurationError, match="a duration is kept for"):
+        optimal_timing(robot, path, custom, duration=1.0)
