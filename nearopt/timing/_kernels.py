@@ -65,6 +65,7 @@ def iterate(
     e_w,
     ds,
     ends,
+    price,
     scale,
     f_scale,
     tolerance,
@@ -107,6 +108,11 @@ def iterate(
         _at(z, ends, b, lam, hinv, croot, hdiag, rd, rd_size, rhs, hoff, q)
         _energy_sums(e_left, e_cl, e_cr, e_d, e_node, e_const, e_w, b, lam, hinv, croot, q)
         f_total = _objective(ds, lam, hinv, croot, q, f_scale, rd, rd_size, hdiag, hoff)
+        for k in range(1, big_n):  # a linear term Σ price_k b_k (0 but for set durations)
+            if price[k] != 0.0:
+                f_total += price[k] * b[k]
+                rd[k] += price[k] * f_scale
+                rd_size[k] += abs(price[k] * f_scale)
         gap, rp_max = _rows(
             z, s, y, left, cl, cr, sd, node, const, b, lam, hinv, croot,
             gl, gr, rp, w, inv_s, rd, rd_size, hdiag, hoff, rhs,

@@ -72,6 +72,7 @@ def solve_conic(
     time_limit: float = np.inf,
     b_ends: tuple[float, float] = (0.0, 0.0),
     max_duration: float | None = None,
+    price: NDArray[np.float64] | None = None,
 ) -> ConicSolution:
     """Solve the SOCP of this module's docstring.
 
@@ -105,6 +106,8 @@ def solve_conic(
         rows' terms in them are in ``rows`` and ``torque`` already).
     max_duration
         t_e = Σ t_k ≤ this [s] (t_k ≥ the segment's time), or None.
+    price
+        A linear term Σ price_k z_k added to the cost, shape (N − 1,), or None.
     """
     import clarabel
 
@@ -124,6 +127,8 @@ def solve_conic(
     _time_block(pb, clarabel, at, ds, roots)
     q_vec = np.zeros(at.nx)
     q_vec[at.it : at.it + big_n] = 1.0
+    if price is not None:
+        q_vec[at.iz : at.iz + nz] = price
     if energy:
         _energy_block(pb, clarabel, at, ds, weights, torque, n, roots)
         q_vec[at.ie : at.ie + big_n] = 1.0

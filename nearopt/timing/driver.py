@@ -220,8 +220,22 @@ def _solve_exactly(
             raise out_of_time(problem, 0.0)
         return deadline - time.perf_counter()
 
-    def plain(prob: TimingProblem, f0: Cost, start: NDArray | None) -> TimingSolution:
-        return solve_timing(prob, f0, tolerance=tolerance, guess=start, time_limit=left())
+    def plain(
+        prob: TimingProblem,
+        f0: Cost,
+        start: NDArray | None,
+        price: NDArray | None = None,
+        kernel: bool = False,
+    ) -> TimingSolution:
+        return solve_timing(
+            prob,
+            f0,
+            tolerance=tolerance,
+            guess=start,
+            time_limit=left(),
+            price=price,
+            method=TimingMethod.INTERIOR if kernel else None,
+        )
 
     def timed(prob: TimingProblem, start: NDArray | None) -> TimingSolution:
         if target is None:

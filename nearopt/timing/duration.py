@@ -14,10 +14,11 @@ position on log t_e against log ρ alternating with bisection:
 * t_e = T above the free optimum's duration: ρ > 1, up to the torque-only optimum (ρ → ∞). The
   time-optimal cost f0 = 1 has J = T for *every* timing of duration T: of those, nearopt returns
   the one of least Σ_i u_i²/U_i² (U_i the effort limit), from the weights ρ/U_i².
-  For a T beyond the torque-only optimum's duration (an arm whose gravity costs more
-  torque the longer it holds it), a motion at rest at both ends is that optimum slowed down
-  uniformly to T (b → αb: every torque then lies between gravity's and the optimum's, so every
-  limit holds) — no longer an optimum of J, which the problem's convexity does not reach there.
+  For a T beyond the torque-only optimum's duration (an arm whose gravity costs more torque
+  the longer it holds it, or moving ends that the optimum keeps fast), t_e ≥ T binds and is not
+  convex: the convex–concave procedure minimises J + ν c·b with c = −∇t_e at the last answer (a
+  price on speed where it shortens the motion most, t_e's tangent lying below it), ν searched
+  so that t_e = T, until b settles: a stationary point of J under t_e = T (a local optimum).
 
 The search stops within ``DURATION_TOLERANCE`` of T, below it; a motion at rest at both ends is
 then slowed down uniformly to exactly T (by the caller), a moving one is left as it is.
@@ -32,7 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..cost import Cost, TimeCost, TorqueCost
-from ..errors import ConfigurationError, InfeasiblePathError
+from ..errors import ConfigurationError, InfeasiblePathError, SolverError
 from ..trajectory import segment_times
 from .solvers import TimingSolution
 
@@ -46,8 +47,13 @@ __all__ = ["DURATION_TOLERANCE", "check_duration", "solve_for_duration", "durati
 DURATION_TOLERANCE = 1e-9  # relative: the search stops with t_e in [T (1 − this), T]
 MAX_SOLVES = 60  # solves of one search
 ROUNDING = 1e-12  # relative: a t_e this far above T is T (the sums of t_e round)
+CCP_ROUNDS = 12  # convex–concave rounds beyond the torque-only optimum's duration
+CCP_SETTLED = 1e-6  # relative change of the discretised J at which they stop
 
-Solve = Callable[["TimingProblem", Cost, "NDArray[np.float64] | None"], TimingSolution]
+Solve = Callable[
+    ["TimingProblem", Cost, "NDArray[np.float64] | None", "NDArray[np.float64] | None", bool],
+    TimingSolution,
+]  # (problem, cost, guess, price, the kernel alone)
 
 
 def check_duration(name: str, value: object) -> float | None:
@@ -101,7 +107,7 @@ def solve_for_duration(
     limit, duration = duration, duration * (1.0 - below)
     n = problem.dof
     weights = cost.torque_weights(n)
-    free = solve(problem, cost, guess)
+    free = solve(problem, cost, guess, None, False)
     t_free = duration_of(problem, free.b)
     if _within(t_free, duration) or (not exact and t_free <= duration * (1.0 + ROUNDING)):
         return free, cost
@@ -130,8 +136,9 @@ def solve_for_duration(
             return sol_t[1], TorqueCost(weights=rho * base)
         if sol_t[0] > duration:
             high = (rho, *sol_t)
-        elif rho > 1e12 or sol_t[0] <= low[1] * (1.0 + 1e-12):
-            return _beyond(problem, duration, sol_t, rho, base)
+        elif rho > 1e12 or sol_t[0] - low[1] < 1e-6 * (duration - sol_t[0]):
+            # t_e no longer grows with ρ: T lies beyond the torque-only optimum's duration
+            return _beyond(problem, solve, duration, sol_t[1], TorqueCost(weights=rho * base))
         else:
             low, rho = (rho, *sol_t), rho * 10.0
     return _search(problem, solve, base, duration, low, high)
@@ -142,9 +149,28 @@ def _within(t: float, duration: float) -> bool:
 
 
 def _at(
-    problem: TimingProblem, solve: Solve, cost: TorqueCost, guess: NDArray[np.float64] | None
+    problem: TimingProblem,
+    solve: Solve,
+    cost: TorqueCost,
+    guess: NDArray[np.float64] | None,
+    price: NDArray[np.float64] | None = None,
 ) -> tuple[float, TimingSolution]:
-    sol = solve(problem, cost, guess)
+    """t_e and the solution of one member of the family. The kernel alone from its own start
+    first; where it fails (it was seen to cycle on damped arms with moving ends), from
+    ``guess`` (a neighbour's answer), then with the weights or the price nudged by 1e-9 (the
+    search reads t_e of what was solved: a nudge only moves it along the family); then
+    Clarabel."""
+    for nudge, start in ((1.0, None), (1.0, guess), (1.0 + 1e-9, None)):
+        if nudge == 1.0 and start is guess and guess is None:
+            continue
+        weights = cost.torque_weights(problem.dof) * (nudge if price is None else 1.0)
+        priced = None if price is None else price * nudge
+        try:
+            sol = solve(problem, TorqueCost(weights=weights), start, priced, True)
+        except SolverError:
+            continue
+        return duration_of(problem, sol.b), sol
+    sol = solve(problem, cost, guess, price, False)
     return duration_of(problem, sol.b), sol
 
 
@@ -156,59 +182,130 @@ def _search(
     low: tuple,
     high: tuple,
 ) -> tuple[TimingSolution, TorqueCost]:
-    """False position (Illinois) on log t_e against log ρ between ``low`` (t_e < T) and
-    ``high`` (t_e > T), each (ρ, t_e, solution); ρ = 0 at ``low`` is the time-optimal end."""
+    """The weights ρ·``base`` whose optimum lasts T, between ``low`` (t_e < T) and ``high``
+    (t_e > T), each (ρ, t_e, solution); ρ = 0 at ``low`` is the time-optimal end."""
+
+    def at(x: float, guess: NDArray[np.float64] | None) -> tuple[float, TimingSolution]:
+        return _at(problem, solve, TorqueCost(weights=math.exp(x) * base), guess)
+
+    x_hi = math.log(high[0])
+    x_lo = math.log(low[0]) if low[0] > 0.0 else x_hi - 30.0
+    x, sol = _root(at, duration, (x_lo, *low[1:]), (x_hi, *high[1:]), problem.at_rest)
+    return sol, TorqueCost(weights=math.exp(x) * base)
+
+
+def _root(
+    at: Callable[[float, NDArray[np.float64] | None], tuple[float, TimingSolution]],
+    duration: float,
+    low: tuple,
+    high: tuple,
+    settle: bool,
+) -> tuple[float, TimingSolution]:
+    """x with t_e(x) = T to :data:`DURATION_TOLERANCE`, t_e increasing in x, between ``low``
+    and ``high`` (x, t_e, solution): false position on log t_e (Illinois), bisection every
+    other step — t_e may stay flat near one end (a degenerate optimum) and then rise steeply,
+    where false position alone crawls. With ``settle`` (a motion at rest, slowed down to T by
+    the caller), the best answer below T is taken when the bracket closes; else that is an
+    error."""
     target = math.log(duration * (1.0 - 0.5 * DURATION_TOLERANCE))
-    (r_lo, t_lo, s_lo), (r_hi, t_hi, _) = low, high
-    x_lo = math.log(r_lo) if r_lo > 0.0 else math.log(r_hi) - 30.0
-    x_hi = math.log(r_hi)
+    (x_lo, t_lo, best), (x_hi, t_hi, _) = low, high
     f_lo, f_hi = math.log(t_lo) - target, math.log(t_hi) - target
     side = 0
-    best = s_lo
     for step in range(MAX_SOLVES):
-        # false position, and bisection every other step: t_e(ρ) may stay flat near the
-        # time-optimal end (a degenerate optimum) and then rise steeply, where false position
-        # alone crawls
         x = (x_lo * f_hi - x_hi * f_lo) / (f_hi - f_lo)
         if step % 2 or not x_lo < x < x_hi:
             x = 0.5 * (x_lo + x_hi)
-        cost = TorqueCost(weights=math.exp(x) * base)
-        t, sol = _at(problem, solve, cost, None)
+        t, sol = at(x, best.b)
         if _within(t, duration):
-            return sol, cost
+            return x, sol
         f = math.log(t) - target
         if f < 0.0:
-            x_lo, f_lo, s_lo, best = x, f, sol, sol
+            x_lo, f_lo, best = x, f, sol
             f_hi, side = (0.5 * f_hi, side) if side == -1 else (f_hi, -1)
         else:
             x_hi, f_hi = x, f
             f_lo, side = (0.5 * f_lo, side) if side == 1 else (f_lo, 1)
         if x_hi - x_lo < 1e-13:
             break
-    if not problem.at_rest:
+    if not settle:
         raise InfeasiblePathError(
             f"stage 1 found no timing of duration {duration:.9g} s within "
-            f"{DURATION_TOLERANCE:g} of it (the nearest: {duration_of(problem, best.b):.9g} s)"
+            f"{DURATION_TOLERANCE:g} of it (the nearest: {math.exp(f_lo + target):.9g} s)"
         )
-    return best, TorqueCost(weights=math.exp(x_lo) * base)
+    return x_lo, best
 
 
 def _beyond(
     problem: TimingProblem,
+    solve: Solve,
     duration: float,
-    slowest: tuple[float, TimingSolution],
-    rho: float,
-    base: NDArray[np.float64],
+    slowest: TimingSolution,
+    cost: TorqueCost,
 ) -> tuple[TimingSolution, TorqueCost]:
-    """T beyond the torque-only optimum's duration: that optimum, to be slowed down uniformly
-    by the caller (at rest at both ends); refused for a motion that starts or ends moving."""
-    if not problem.at_rest:
-        raise InfeasiblePathError(
-            f"duration {duration:.6g} s is longer than any optimum of this cost takes with "
-            f"these moving ends (the torque-only optimum takes {slowest[0]:.6g} s); a "
-            "longer path, or slower ends, would do"
-        )
-    return slowest[1], TorqueCost(weights=rho * base)
+    """T beyond the longest optimum of the family (the torque-only one, ``slowest``): a
+    stationary point of J under t_e = T by the convex–concave procedure. t_e ≥ T is the
+    constraint that binds there, t_e is convex in b, so its tangent at the last iterate b^j
+    lies below it: minimise J + ν c^j·b with c^j = −∇t_e(b^j) ≥ 0 (a price on speed where it
+    shortens the motion most), ν ≥ 0 found so that t_e = T; repeat from the answer until J
+    settles (a fixed point is a KKT point of min J s.t. t_e = T)."""
+    found, x_prev, last = slowest, None, math.inf
+    for _ in range(CCP_ROUNDS):
+        price = -_duration_gradient(problem, found.b)
+        reach = max(float(price @ found.b), 1e-300)
+        start = math.log(duration / reach) if x_prev is None else x_prev
+
+        def at(
+            x: float, guess: NDArray[np.float64] | None, price: NDArray[np.float64] = price
+        ) -> tuple[float, TimingSolution]:
+            return _at(problem, solve, cost, guess, math.exp(x) * price)
+
+        x_prev, found = _price_root(at, duration, start, problem.at_rest)
+        value = found.objective
+        if abs(value - last) <= CCP_SETTLED * abs(value):
+            break
+        last = value
+    return found, cost
+
+
+def _price_root(
+    at: Callable[[float, NDArray[np.float64] | None], tuple[float, TimingSolution]],
+    duration: float,
+    start: float,
+    settle: bool,
+) -> tuple[float, TimingSolution]:
+    """x = log ν with t_e(x) = T: a bracket grown by factors of 4 from ``start`` (t_e grows
+    with x), then :func:`_root`."""
+    t0, sol0 = at(start, None)
+    if _within(t0, duration):
+        return start, sol0
+    step = math.log(4.0) if t0 < duration else -math.log(4.0)
+    near = (start, t0, sol0)
+    for _grow in range(40):
+        x = near[0] + step
+        t, sol = at(x, near[2].b)
+        if _within(t, duration):
+            return x, sol
+        if (t > duration) == (step > 0):  # passed T: the bracket
+            low, high = (near, (x, t, sol)) if step > 0 else ((x, t, sol), near)
+            return _root(at, duration, low, high, settle)
+        near = (x, t, sol)
+    raise InfeasiblePathError(
+        f"stage 1 found no timing of duration {duration:.6g} s: the nearest lasts {near[1]:.6g} s"
+    )
+
+
+def _duration_gradient(problem: TimingProblem, b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """∂t_e/∂b_k at every knot (0 at the fixed ends), shape (N+1,) [s³]."""
+    lam = np.sqrt(b)
+    ds = np.diff(problem.sigma)
+    per = -2.0 * ds / (lam[:-1] + lam[1:]) ** 2  # ∂Δt_k/∂(λ_k + λ_{k+1})
+    grad = np.zeros(b.size)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        half = np.where(lam > 0.0, 0.5 / lam, 0.0)
+    grad[:-1] += per * half[:-1]
+    grad[1:] += per * half[1:]
+    grad[0] = grad[-1] = 0.0
+    return grad
 
 
 def _too_short(duration: float, fastest: float) -> InfeasiblePathError:

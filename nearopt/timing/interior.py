@@ -231,6 +231,7 @@ def solve_interior(
     deadline: float = np.inf,
     guess: NDArray[np.float64] | None = None,
     reduce: bool = True,
+    price: NDArray[np.float64] | None = None,
 ) -> InteriorSolution:
     """Minimise F of this module's docstring over b.
 
@@ -249,14 +250,20 @@ def solve_interior(
     guess
         b at the knots of a close path, shape (N+1,): the shape of the start.
     reduce
-        Leave out the rows that other rows at their sample imply (the same problem, fewer rows).
+        Leave out the rows that other rows at their sample imply (the same problem, fewer rows;
+        at rest at both ends only).
+    price
+        A linear term Σ_k price_k b_k added to F, shape (N+1,) (the ends' entries unused), or
+        None (see :mod:`nearopt.timing.duration`: durations beyond every optimum of F).
     """
     problem = disc.problem
     big_n = problem.segments
     sigma = problem.sigma
     ds = disc.ds
     rows, cap, sample = _one_sided(disc)
-    if reduce:
+    if reduce and problem.at_rest:
+        # (with moving ends the reduced rows made the method cycle near some optima: seen on
+        # panda with a set duration, converging in 21 iterations with every row kept)
         rows = _without_implied(disc, rows, cap, sample)
     free = np.arange(1, big_n)
 
@@ -294,7 +301,8 @@ def solve_interior(
         # method is an infeasible-start one in the rows (residual c + s → 0), so those start
         # with a slack of the order of the others'
         s = np.where(s > 1e-3, s, 0.1)
-    f_scale = 1.0 / disc.torque_cost(z, weights)
+    price = np.zeros(big_n + 1) if price is None else np.asarray(price, dtype=float)
+    f_scale = 1.0 / (disc.torque_cost(z, weights) + float(price[1:-1] @ z))
     y = (1.0 / m) / s  # centred, with a duality gap of the order of F (scaled to 1)
     args = (
         *_kernel_rows(rows),
@@ -302,6 +310,7 @@ def solve_interior(
         e_rows[6],
         ds,
         np.array(problem.b_ends, dtype=float),
+        np.ascontiguousarray(price),
         scale,
         f_scale,
         tolerance,

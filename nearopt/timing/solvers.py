@@ -104,6 +104,7 @@ def solve_timing(
     guess: NDArray[np.float64] | None = None,
     method: TimingMethod | None = None,
     max_duration: float | None = None,
+    price: NDArray[np.float64] | None = None,
 ) -> TimingSolution:
     """Solve stage 1 on a grid (the kernel: arrays in, b out).
 
@@ -133,6 +134,10 @@ def solve_timing(
         t_e ≤ this [s] as a constraint of Clarabel's SOCP (``method=TimingMethod.SOCP`` only:
         the reference of :func:`~nearopt.timing.optimal_timing`'s ``max_duration``, which
         searches over the cost's weights with the kernel instead).
+    price
+        A linear term Σ_k price_k b_k added to J's discretisation, shape (N+1,) (the ends'
+        entries unused), for a TimeCost or TorqueCost: how
+        :mod:`nearopt.timing.duration` lengthens a motion beyond every optimum of J.
 
     Raises
     ------
@@ -160,12 +165,16 @@ def solve_timing(
             "solve_timing takes max_duration with method=TimingMethod.SOCP and a TimeCost or "
             "TorqueCost (the reference); optimal_timing(…, max_duration=) solves it otherwise"
         )
+    if price is not None and not isinstance(cost, TorqueCost):
+        raise ConfigurationError("solve_timing takes a price with a TimeCost or TorqueCost only")
     if max_duration is not None:
         weights = cost.torque_weights(problem.dof)
         return _solve_convex(disc, cost, weights, tolerance, time_limit, None, max_duration)
     if isinstance(cost, TorqueCost):
         weights = cost.torque_weights(problem.dof)
-        return _solve_builtin(disc, cost, weights, tolerance, deadline, guess, time_limit, method)
+        return _solve_builtin(
+            disc, cost, weights, tolerance, deadline, guess, time_limit, method, price
+        )
     # any other f0: a local NLP from inside the time-optimal profile
     fastest = _solve_builtin(
         disc, TimeCost(), np.zeros(problem.dof), tolerance, deadline, guess, time_limit, method
@@ -185,6 +194,7 @@ def _solve_builtin(
     guess: NDArray[np.float64] | None,
     time_limit: float,
     method: TimingMethod | None,
+    price: NDArray[np.float64] | None = None,
 ) -> TimingSolution:
     """f0 = 1 + Σ w u²: the interior-point kernel, and Clarabel's SOCP where it fails (unless
     ``method`` is ``TimingMethod.INTERIOR``), or Clarabel's SOCP alone (``TimingMethod.SOCP``,
@@ -192,7 +202,7 @@ def _solve_builtin(
     note = ""
     if method != TimingMethod.SOCP:
         sol = solve_interior(
-            disc, weights, tolerance=KERNEL_TOLERANCE, deadline=deadline, guess=guess
+            disc, weights, tolerance=KERNEL_TOLERANCE, deadline=deadline, guess=guess, price=price
         )
         if sol.timed_out:
             raise out_of_time(disc.problem, time_limit)
@@ -213,7 +223,7 @@ def _solve_builtin(
     z_guess = None if guess is None or not disc.has_damping else guess[1:-1]
     try:
         reference = _solve_convex(
-            disc, cost, weights, tolerance, deadline - time.perf_counter(), z_guess
+            disc, cost, weights, tolerance, deadline - time.perf_counter(), z_guess, price=price
         )
     except SolverError as exc:
         if exc.status == "MaxTime":
@@ -241,6 +251,7 @@ def _solve_convex(
     time_limit: float = np.inf,
     z_guess: NDArray[np.float64] | None = None,
     max_duration: float | None = None,
+    price: NDArray[np.float64] | None = None,
 ) -> TimingSolution:
     """f0 = 1 + Σ w u²: the SOCP, repeated with the damping re-linearised until a fixed point.
 
@@ -270,6 +281,7 @@ def _solve_convex(
                 time_limit=deadline - time.perf_counter(),
                 b_ends=disc.problem.b_ends,
                 max_duration=max_duration,
+                price=None if price is None else price[1:-1],
             )
             if str(sol.status) == "MaxTime":  # no use re-linearising an unfinished answer
                 raise out_of_time(disc.problem, time_limit)
