@@ -117,6 +117,8 @@ class PlanRequest:
     stage1_only, method, grid, max_iterations, time_limit
         The planner: stage 1 only, the path update, grid segments, iteration and wall-time [s]
         budgets.
+    duration, max_duration
+        t_e exactly, or at most [s] (one or neither; not for a task).
     no_velocity_limits, no_position_limits
         Limits switched off.
     scene, margin, self_collision
@@ -160,6 +162,8 @@ class PlanRequest:
     grid: int = 200
     max_iterations: int = 200
     time_limit: float = 300.0
+    duration: float | None = None
+    max_duration: float | None = None
     no_velocity_limits: bool = False
     no_position_limits: bool = False
     scene: str | None = None
@@ -404,6 +408,8 @@ _KINDS: dict[str, _Kind] = {
     "grid": _Kind.INTEGER,
     "max_iterations": _Kind.INTEGER,
     "time_limit": _Kind.NUMBER,
+    "duration": _Kind.NUMBER,
+    "max_duration": _Kind.NUMBER,
     "no_velocity_limits": _Kind.FLAG,
     "no_position_limits": _Kind.FLAG,
     "scene": _Kind.TEXT,
@@ -671,6 +677,10 @@ def solve(
         optimise_goal=not request.fixed_goal,
     )
     if prepared.task is not None:
+        if request.duration is not None or request.max_duration is not None:
+            raise ConfigurationError(
+                "a task's duration is not set yet: --duration and --max-duration plan one motion"
+            )
         return plan_task(
             prepared.robot,
             prepared.q0,
@@ -686,6 +696,8 @@ def solve(
         prepared.cost,
         callback=callback,
         via=prepared.via,
+        duration=request.duration,
+        max_duration=request.max_duration,
         **settings.keywords(),
     )  # type: ignore[arg-type]
 

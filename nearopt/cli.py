@@ -260,6 +260,19 @@ def _planner_options(p: argparse.ArgumentParser) -> None:
         help="wall-time budget [s] (300; inf: none); the best plan so far is kept",
     )
     p.add_argument("--no-velocity-limits", action="store_true", help="ignore joint speed limits")
+    when = p.add_mutually_exclusive_group()
+    when.add_argument(
+        "--duration",
+        type=float,
+        metavar="T",
+        help="the motion takes exactly T seconds (J minimised under it; time or 1 + Σ w u²)",
+    )
+    when.add_argument(
+        "--max-duration",
+        type=float,
+        metavar="T",
+        help="the motion takes at most T seconds (J minimised under it; time or 1 + Σ w u²)",
+    )
     p.add_argument(
         "--acceleration-limit",
         nargs="+",

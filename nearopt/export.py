@@ -81,8 +81,9 @@ def check_sampling(result: Plan, rate: float) -> str | None:
 
 def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | None = None) -> str:
     """The plan as ``{"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
-    "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists), and ``"via": [{"t",
-    "q"}, …]`` when the motion passes via-points.
+    "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists), ``"via": [{"t",
+    "q"}, …]`` when the motion passes via-points, and ``"duration_asked": {"seconds",
+    "exact"}`` when its duration was set (t_e = seconds, or at most that).
 
     A task (:class:`~nearopt.TaskResult`) has, instead of ``"history"`` and ``"via"``,
     ``"targets": [{"name", "t", "q", "stop", "pose", "frame"}, …]`` (``"pose"``: position and
@@ -110,6 +111,9 @@ def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | Non
     segments = result.segments if isinstance(result, TaskResult) else None
     if segments is None:
         document["history"] = [{"J": it.J, "alpha": it.alpha} for it in result.history]
+        asked = getattr(result, "duration_asked", None)
+        if asked is not None:
+            document["duration_asked"] = {"seconds": asked[0], "exact": asked[1]}
         if result.via:  # where the motion passes its via-points
             document["via"] = [
                 {"t": float(t), "q": q.tolist()}

@@ -177,6 +177,7 @@ def verify(
     qd0: ArrayLike | None = None,
     qde: ArrayLike | None = None,
     duration: float | None = None,
+    max_duration: float | None = None,
 ) -> VerificationReport:
     """Check a motion at a controller rate, from the robot model alone.
 
@@ -233,8 +234,9 @@ def verify(
     qd0, qde
         Expected θ̇(0) and θ̇(t_e) [rad/s] (to ``end_tolerance``; the simulated end speed to ten
         times ``simulation_tolerance``); default: at rest.
-    duration
-        Expected t_e [s], to 1e-9 relative; default: any.
+    duration, max_duration
+        Expected t_e [s], to 1e-9 relative, or its largest value [s] (1e-12 relative over);
+        default: any.
 
     Raises
     ------
@@ -273,6 +275,8 @@ def verify(
     checks.append(_rest_check(robot, ends, tol, v0, ve))
     if duration is not None:
         checks.append(_duration_check(trajectory, duration))
+    if max_duration is not None:
+        checks.append(_duration_check(trajectory, max_duration, at_most=True))
     if clearance is not None:
         checks.append(clearance)
     if cost is not None and J is not None:
@@ -423,7 +427,16 @@ def verify_plan(
         position_limits=position_limits,
         collisions=plan.collisions,
         waypoints=plan.waypoints,
+        **_duration_asked(plan),
     )
+
+
+def _duration_asked(plan: object) -> dict[str, float]:
+    """verify's duration keyword of a plan made with one (``duration_asked``: (T, exact))."""
+    asked = getattr(plan, "duration_asked", None)
+    if asked is None:
+        return {}
+    return {"duration": asked[0]} if asked[1] else {"max_duration": asked[0]}
 
 
 @dataclass(frozen=True)
@@ -647,15 +660,17 @@ def _velocity(robot: Robot, value: ArrayLike, name: str) -> NDArray:
     return v
 
 
-def _duration_check(trajectory: Motion, duration: object) -> Check:
-    """t_e against the duration asked for (relative)."""
+def _duration_check(trajectory: Motion, duration: object, at_most: bool = False) -> Check:
+    """t_e against the duration asked for (relative), or against its largest value."""
+    name = "max_duration" if at_most else "duration"
     if not is_number(duration) or not float(duration) > 0.0:
-        raise ConfigurationError(f"duration must be a positive number of seconds, got {duration!r}")
+        raise ConfigurationError(f"{name} must be a positive number of seconds, got {duration!r}")
     t = float(duration)
+    excess = (trajectory.duration - t) / t
     return Check(
-        "duration",
-        abs(trajectory.duration - t) / t,
-        1e-9,
+        "duration at most" if at_most else "duration",
+        excess if at_most else abs(excess),
+        1e-12 if at_most else 1e-9,
         "relative",
         f"t_e = {trajectory.duration:.12g} s against {t:.12g} s",
     )

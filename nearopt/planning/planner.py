@@ -29,6 +29,7 @@ from ..collision import Clearance, CollisionModel, Scene, collisions_for
 from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import (
     ConfigurationError,
+    InfeasiblePathError,
     SolverError,
     UnreachablePoseError,
 )
@@ -39,6 +40,7 @@ from ..timing import (
     MAX_GRID,
     JerkTimingResult,
     TimingResult,
+    check_duration,
     optimal_timing,
     time_with_jerk_limits,
 )
@@ -107,6 +109,8 @@ def plan(
     self_collision: bool | None = None,
     optimise_goal: bool = True,
     via: Sequence[ArrayLike | ToolPose] | None = (),
+    duration: float | None = None,
+    max_duration: float | None = None,
 ) -> PlanResult:
     """Plan a near-optimum motion from rest at θ0 to rest at θe (Sections 4-6).
 
@@ -157,6 +161,13 @@ def plan(
         :class:`~nearopt.ToolPose` (inverse kinematics from the previous point). The path goes
         through each exactly at every iterate (at the σ of the polyline's arc length); stage 1
         times the whole path. ``"scp"`` only.
+    duration, max_duration
+        t_e = ``duration`` exactly, or t_e ≤ ``max_duration`` [s] (one or neither), J of a
+        :class:`~nearopt.TimeCost` or :class:`~nearopt.TorqueCost` minimised under it. Stage 1
+        meets it by the Lagrangian of the duration (:mod:`nearopt.timing.duration`); stage 2
+        minimises that Lagrangian cost, 1 + Σ w'_i u_i² with the weights stage 1 found for
+        the first path (J + μ t_e, scaled), and its path is timed to the duration at the end
+        (the first path is returned where that costs less). Not with jerk limits.
 
     Returns
     -------
@@ -204,12 +215,114 @@ def plan(
         via,
         t_start,
     )
+    if duration is not None or max_duration is not None:
+        setup = replace(setup, duration=_check_duration(setup, duration, max_duration))
     line, start, via_s = first_path(setup)
-    initial = _time_first_path(setup, line, start)
-    timing, reason, message, evaluations, history = _improve(
-        setup, line, start, via_s, initial, callback, verbose
-    )
+    if setup.duration is None:
+        initial = _time_first_path(setup, line, start)
+        timing, reason, message, evaluations, history = _improve(
+            setup, line, start, via_s, initial, callback, verbose
+        )
+    else:
+        try:
+            initial = _time_first_path(setup, line, start)
+        except InfeasiblePathError:  # the first path is too slow for T: stage 2 may find one
+            initial = None
+        timing, reason, message, evaluations, history = _improve_under_duration(
+            setup, line, start, via_s, initial, callback, verbose
+        )
+        if initial is None:  # the first path as it is, for the record
+            initial = _time_first_path(replace(setup, duration=None), line, start)
     return _result(setup, timing, initial, history, reason, message, evaluations, via_s)
+
+
+def _check_duration(setup: Segment, duration: object, max_duration: object) -> tuple[float, bool]:
+    """(T, exact) of :func:`plan`'s duration arguments; ConfigurationError for both, a bad
+    value, a cost outside 1 + Σ w u², jerk limits."""
+    exact = check_duration("duration", duration)
+    most = check_duration("max_duration", max_duration)
+    if exact is not None and most is not None:
+        raise ConfigurationError("give duration (t_e = T) or max_duration (t_e ≤ T), not both")
+    if not isinstance(setup.cost, TorqueCost):
+        raise ConfigurationError(
+            "a duration is kept for f0 = 1 + Σ w u² (TimeCost, TorqueCost), not "
+            f"{setup.cost.describe()}"
+        )
+    if np.any(np.isfinite(setup.robot.limits.jerk)):
+        raise ConfigurationError(
+            "a duration with jerk limits is not planned yet: give one or the other"
+        )
+    return (exact, True) if exact is not None else (most, False)
+
+
+def _improve_under_duration(
+    setup: Segment,
+    line: Path,
+    start: Path | None,
+    via_s: tuple[float, ...],
+    initial: TimingResult | None,
+    callback: Callable[[Iteration], None] | None,
+    verbose: bool,
+) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+    """Stage 2 on the duration's Lagrangian cost (``initial.lagrangian``), then the path found
+    timed to the duration with the plan's cost; then stage 2 on the plan's own cost, and (where
+    no path found so far can be as fast as T) on a quarter and a sixteenth of the Lagrangian's
+    torque weights (time weighs more). The lowest J under the duration is returned, the first
+    path's timing where that is lower. ``initial`` is None where the first path cannot be as
+    fast as T: stage 2 then starts on the time-optimal cost."""
+    n = setup.robot.n
+    t, exact = setup.duration
+    base = setup.cost.torque_weights(n)
+    lagrangian = TimeCost() if initial is None else (initial.lagrangian or setup.cost)
+    rounds = [lagrangian.torque_weights(n)]
+    if not np.array_equal(rounds[0], base):
+        rounds.append(base)
+    rounds += [rounds[0] * 0.25, rounds[0] * 0.0625]
+    best: tuple | None = None
+    evaluations, fastest = 1, np.inf
+    for k, weights in enumerate(rounds):
+        if k >= 2 and best is not None or time.perf_counter() >= setup.deadline:
+            break  # the slower rounds only while no path meets T
+        inner = replace(setup, cost=TorqueCost(weights=weights), duration=None)
+        first = _time_first_path(inner, line, start)
+        timing, reason, message, spent, history = _improve(
+            inner, line, start, via_s, first, callback, verbose
+        )
+        evaluations += spent
+        try:
+            final = _time_first_path(setup, timing.trajectory.path, start)
+        except InfeasiblePathError:  # stage 2's path is slower than T at its fastest
+            fastest = min(fastest, _fastest(setup, timing.trajectory.path))
+            continue
+        if best is None or final.J < best[0].J:
+            best = (final, reason, message, history, weights)
+    if best is None:
+        if initial is None:
+            raise InfeasiblePathError(
+                f"duration {t:.6g} s is shorter than the time-optimal motion along every path "
+                f"stage 2 found, the fastest of which takes {fastest:.6g} s (and the first path)"
+            )
+        return initial, reason, message + NO_PATH_MEETS, evaluations, history
+    final, reason, message, history, weights = best
+    ratio = float(np.max(weights) / np.max(base)) if np.any(base > 0) else float(np.max(weights))
+    message += (
+        f"; stage 2 minimised the Lagrangian of t_e {'=' if exact else '≤'} {t:.6g} s (time "
+        f"+ torque weights × {ratio:.3g}), its path then timed under the duration"
+    )
+    if initial is not None and final.J > initial.J:
+        final = initial
+        message += "; the first path is returned: it costs less under the duration"
+    return final, reason, message, evaluations, history
+
+
+def _fastest(setup: Segment, path: Path) -> float:
+    """t_e of the time-optimal timing of a path on the plan's grid [s]."""
+    return optimal_timing(
+        setup.robot, path, grid=setup.grid, velocity_limits=setup.velocity_limits
+    ).duration
+
+
+NO_PATH_MEETS = "; no path stage 2 found is as fast as the duration: the first path is returned"
 
 
 def _setup(
@@ -317,9 +430,10 @@ def _setup(
 
 
 def _time_first_path(setup: Segment, line: Path, start: Path | None) -> TimingResult:
-    """Stage 1 on the first path, on the plan's grid."""
+    """Stage 1 on the first path, on the plan's grid (under the plan's duration, if any)."""
     robot, cost, grid = setup.robot, setup.cost, setup.grid
     velocity_limits, deadline = setup.velocity_limits, setup.deadline
+    t, exact = setup.duration or (None, False)
     try:
         initial = optimal_timing(
             robot,
@@ -328,6 +442,8 @@ def _time_first_path(setup: Segment, line: Path, start: Path | None) -> TimingRe
             grid=grid,
             velocity_limits=velocity_limits,
             time_limit=deadline - time.perf_counter(),
+            duration=t if exact else None,
+            max_duration=None if exact else t,
         )
     except SolverError as exc:
         what = "the straight line" if start is None else "the collision-free start"
@@ -439,6 +555,7 @@ def _result(
         via=tuple(vias),
         via_s=via_s,
         jerk_timing=jerk,
+        duration_asked=setup.duration,
     )
 
 

@@ -156,6 +156,7 @@ class Segment:
     optimise_goal: bool
     t_start: float
     deadline: float
+    duration: tuple[float, bool] | None = None  # (T, exact): t_e = T, or t_e ≤ T
 
 
 @dataclass(frozen=True)
@@ -271,6 +272,8 @@ class PlanResult:
         Where the robot has jerk limits: the returned path timed under them (C¹, θ̈ = 0 at
         rest; :func:`~nearopt.timing.time_with_jerk_limits`). It is the motion, J and t_e of
         the plan; ``timing`` is then stage 1's timing of the same path without them.
+    duration_asked
+        The duration asked for [s] and whether exactly (t_e = T) or at most (t_e ≤ T); None.
     """
 
     robot: Robot
@@ -288,6 +291,7 @@ class PlanResult:
     via: tuple[NDArray[np.float64], ...] = ()
     via_s: tuple[float, ...] = ()
     jerk_timing: JerkTimingResult | None = None
+    duration_asked: tuple[float, bool] | None = None
 
     @property
     def final(self) -> TimingResult | JerkTimingResult:

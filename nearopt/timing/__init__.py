@@ -54,6 +54,7 @@ from .between import BetweenSamples, tighten, uniform_slow_down
 from .conic import ConicSolution, is_solved, solve_conic
 from .discretisation import Discretisation, LinearRows, RowBlocks
 from .driver import TimingResult, optimal_timing
+from .duration import DURATION_TOLERANCE, check_duration, duration_of, solve_for_duration
 from .interior import InteriorSolution, load_kernel, solve_interior
 from .jerk import (
     JerkTiming,
@@ -76,6 +77,7 @@ from .problem import (
     check_gravity,
     grid_knots,
     safe_limits,
+    with_moving_ends,
 )
 from .solvers import (
     TimingMethod,
@@ -122,6 +124,11 @@ __all__ = [
     "grid_knots",
     "solve_timing",
     "optimal_timing",
+    "DURATION_TOLERANCE",
+    "check_duration",
+    "duration_of",
+    "solve_for_duration",
+    "with_moving_ends",
     "into_limits",
     "largest_scale",
     "uniform_slow_down",

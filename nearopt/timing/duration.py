@@ -83,9 +83,11 @@ def solve_for_duration(
     solve: Solve,
     guess: NDArray[np.float64] | None = None,
     below: float = 0.0,
-) -> tuple[TimingSolution, TorqueCost]:
+) -> tuple[TimingSolution, TorqueCost | None]:
     """The optimal timing of ``cost`` with t_e ≤ ``duration`` (``exact`` False) or t_e =
-    ``duration`` [s], and the cost of scaled weights whose optimum it is (see the module).
+    ``duration`` [s], and the cost of scaled weights whose optimum it is (see the module;
+    ``cost`` itself where the duration does not bind, None beyond every optimum of the
+    family).
 
     ``solve(problem, cost, guess)`` solves stage 1 without a duration. With ``below`` > 0 the
     search aims that fraction below ``duration`` (the caller slows the motion down to it), and
@@ -241,7 +243,7 @@ def _beyond(
     duration: float,
     slowest: TimingSolution,
     cost: TorqueCost,
-) -> tuple[TimingSolution, TorqueCost]:
+) -> tuple[TimingSolution, None]:
     """T beyond the longest optimum of the family (the torque-only one, ``slowest``): a
     stationary point of J under t_e = T by the convex–concave procedure. t_e ≥ T is the
     constraint that binds there, t_e is convex in b, so its tangent at the last iterate b^j
@@ -264,7 +266,7 @@ def _beyond(
         if abs(value - last) <= CCP_SETTLED * abs(value):
             break
         last = value
-    return found, cost
+    return found, None
 
 
 def _price_root(

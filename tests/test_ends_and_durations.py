@@ -7,9 +7,12 @@ end speeds and t_e ≤ T as its own constraints: the independent reference) and 
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 from conftest import load
+from console import run_cli
 
 import nearopt
 from nearopt.path import StraightPath
@@ -175,3 +178,61 @@ def test_bad_end_velocities_and_durations_are_named() -> None:
     custom = nearopt.CallableCost(lambda q, qd, u: 1.0 + np.sum(u**2, axis=1))
     with pytest.raises(nearopt.ConfigurationError, match="a duration is kept for"):
         optimal_timing(robot, path, custom, duration=1.0)
+
+
+@pytest.mark.parametrize("name", ["two_link", "ur5"])
+def test_a_plan_under_a_duration_meets_it_and_beats_the_line(name: str) -> None:
+    """Stage 2 on the duration's Lagrangian: t_e = T, every check of verify_plan (the duration
+    included), J below the straight line's under the same T (where the line can be that fast)
+    and, at the free plan's own t_e, the free plan's J."""
+    robot, path, _ = seeded_path(name, 21)
+    q0, qe = path.theta0, path.thetae
+    cost = nearopt.TorqueCost(1e-3)
+    free = nearopt.plan(robot, q0, qe, cost, time_limit=60.0)
+    fastest = nearopt.plan(robot, q0, qe, time_limit=60.0).duration
+    for factor in (0.5, 1.0, 1.2):  # between the time-optimal plan's t_e and the free one's
+        duration = fastest + factor * (free.duration - fastest)
+        result = nearopt.plan(robot, q0, qe, cost, duration=duration, time_limit=60.0)
+        assert result.duration == pytest.approx(duration, rel=1e-9, abs=0.0)
+        assert result.duration_asked == (duration, True)
+        report = nearopt.verify_plan(result)
+        assert report.passed and "duration" in str(report), str(report)
+        try:
+            line = nearopt.plan(robot, q0, qe, cost, duration=duration, max_iterations=0)
+            assert result.J < line.J
+        except nearopt.InfeasiblePathError:  # the line is slower than T at its fastest
+            assert duration < nearopt.plan(robot, q0, qe, max_iterations=0).duration
+        if factor == 1.0:
+            assert result.J <= free.J * (1.0 + 1e-6)
+    most = 0.5 * (fastest + free.duration)
+    bounded = nearopt.plan(robot, q0, qe, cost, max_duration=most)
+    assert bounded.duration <= most * (1.0 + 1e-12)
+    assert nearopt.verify_plan(bounded).passed
+
+
+def test_durations_through_the_command_line_and_their_refusals(tmp_path) -> None:
+    out = tmp_path / "plan.json"
+    run = run_cli(
+        "plan", "--robot", "two_link", "--q0", "0.2", "0.1", "--qe", "0.9", "-0.6",
+        "--beta", "0.03", "--duration", "0.3", "--json", str(out),
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    document = json.loads(out.read_text())
+    assert document["duration_asked"] == {"seconds": 0.3, "exact": True}
+    assert document["t"][-1] == pytest.approx(0.3, rel=1e-12)
+    assert document["duration"] == pytest.approx(0.3, rel=1e-9)
+    robot = load("two_link")
+    q0, qe = np.array([0.2, 0.1]), np.array([0.9, -0.6])
+    for options, words in (
+        ({"duration": 1e-3}, "fastest of which takes"),
+        ({"duration": 1.0, "max_duration": 2.0}, "not both"),
+        ({"duration": 0.0}, "positive"),
+    ):
+        with pytest.raises(nearopt.NearoptError, match=words):
+            nearopt.plan(robot, q0, qe, nearopt.TorqueCost(0.03), **options)
+    custom = nearopt.CallableCost(lambda q, qd, u: 1.0 + np.sum(u**2, axis=1))
+    with pytest.raises(nearopt.ConfigurationError, match="a duration is kept for"):
+        nearopt.plan(robot, q0, qe, custom, duration=1.0)
+    jerky = robot.with_limits(jerk=1000.0)
+    with pytest.raises(nearopt.ConfigurationError, match="jerk limits"):
+        nearopt.plan(jerky, q0, qe, duration=1.0)
