@@ -759,6 +759,7 @@ def solve_reference(
     tol: float = 1e-9,
     max_iter: int = 3000,
     inner_limits: bool = True,
+    duration: float | None = None,
 ) -> ReferenceSolution:
     """Solve the free-final-time problem by RK4 multiple shooting and IPOPT, from several starts.
 
@@ -796,6 +797,9 @@ def solve_reference(
         (``substeps`` = 2) the excess measured on ur5 and panda was 1e-4 to 1.5e-3 of the limit.
         A joint can still bounce off a position limit between two bounded points (a ur5 wrist
         without speed limits by 3.5 mrad at K = 100).
+    duration
+        te fixed to this [s] (its bounds both set to it; the starts' te guesses then all T), or
+        None: te free.
 
     Returns
     -------
@@ -841,8 +845,9 @@ def solve_reference(
     x_lo[:, -1] = x_hi[:, -1] = np.r_[qe, np.zeros(n)]
     u_lo = np.tile(lim.effort_lower[:, None], (1, K))
     u_hi = np.tile(lim.effort_upper[:, None], (1, K))
-    lbx = _Transcription.pack(x_lo, u_lo, TE_BOUNDS[0])
-    ubx = _Transcription.pack(x_hi, u_hi, TE_BOUNDS[1])
+    te_bounds = TE_BOUNDS if duration is None else (float(duration), float(duration))
+    lbx = _Transcription.pack(x_lo, u_lo, te_bounds[0])
+    ubx = _Transcription.pack(x_hi, u_hi, te_bounds[1])
 
     te0 = te_guess if te_guess is not None else _te_estimate(robot, q0, qe, velocity_limits)
     rng = np.random.default_rng(seed)
@@ -852,6 +857,7 @@ def solve_reference(
     for j in range(starts):
         factor = 2.0 ** _TE_EXPONENTS[j % len(_TE_EXPONENTS)]
         te_j = float(np.clip(te0 * factor, 2 * TE_BOUNDS[0], 0.5 * TE_BOUNDS[1]))
+        te_j = te_j if duration is None else float(duration)
         bump = rng.normal(0.0, scale) if j >= 2 else np.zeros(n)
         x0 = _initial_guess(robot, q0, qe, K, te_j, bump, guess_lo, guess_hi)
         sol = nlp.solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=w)
