@@ -202,8 +202,8 @@ def test_a_plan_under_a_duration_meets_it_and_beats_the_line(name: str) -> None:
             assert result.J < line.J
         except nearopt.InfeasiblePathError:  # the line is slower than T at its fastest
             assert duration < nearopt.plan(robot, q0, qe, max_iterations=0).duration
-        if factor == 1.0:
-            assert result.J <= free.J * (1.0 + 1e-6)
+        if factor == 1.0:  # (both stop where J changes by < 1e-4 relative per iteration)
+            assert result.J <= free.J * (1.0 + 1e-3)
     most = 0.5 * (fastest + free.duration)
     bounded = nearopt.plan(robot, q0, qe, cost, max_duration=most)
     assert bounded.duration <= most * (1.0 + 1e-12)
@@ -224,7 +224,7 @@ def test_durations_through_the_command_line_and_their_refusals(tmp_path) -> None
     robot = load("two_link")
     q0, qe = np.array([0.2, 0.1]), np.array([0.9, -0.6])
     for options, words in (
-        ({"duration": 1e-3}, "fastest of which takes"),
+        ({"duration": 1e-3}, "along the fastest path stage 2 found"),
         ({"duration": 1.0, "max_duration": 2.0}, "not both"),
         ({"duration": 0.0}, "positive"),
     ):

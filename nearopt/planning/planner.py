@@ -164,10 +164,12 @@ def plan(
     duration, max_duration
         t_e = ``duration`` exactly, or t_e ≤ ``max_duration`` [s] (one or neither), J of a
         :class:`~nearopt.TimeCost` or :class:`~nearopt.TorqueCost` minimised under it. Stage 1
-        meets it by the Lagrangian of the duration (:mod:`nearopt.timing.duration`); stage 2
-        minimises that Lagrangian cost, 1 + Σ w'_i u_i² with the weights stage 1 found for
-        the first path (J + μ t_e, scaled), and its path is timed to the duration at the end
-        (the first path is returned where that costs less). Not with jerk limits.
+        meets it exactly (:mod:`nearopt.timing.duration`); every stage-2 iterate is timed
+        under it, and the convex model keeps t_e, linearised at the iterate's timing, at T.
+        Where the first path cannot be as fast as T, stage 2 starts from the path it finds
+        for the time-optimal cost; stage 2 also runs from the plan without the duration where
+        that path can be as fast, and the lower J is returned. ``"scp"`` only; not with jerk
+        limits.
 
     Returns
     -------
@@ -218,22 +220,66 @@ def plan(
     if duration is not None or max_duration is not None:
         setup = replace(setup, duration=_check_duration(setup, duration, max_duration))
     line, start, via_s = first_path(setup)
-    if setup.duration is None:
-        initial = _time_first_path(setup, line, start)
-        timing, reason, message, evaluations, history = _improve(
-            setup, line, start, via_s, initial, callback, verbose
-        )
-    else:
-        try:
-            initial = _time_first_path(setup, line, start)
-        except InfeasiblePathError:  # the first path is too slow for T: stage 2 may find one
-            initial = None
-        timing, reason, message, evaluations, history = _improve_under_duration(
-            setup, line, start, via_s, initial, callback, verbose
-        )
-        if initial is None:  # the first path as it is, for the record
-            initial = _time_first_path(replace(setup, duration=None), line, start)
+    if setup.duration is not None:
+        line, start = _fast_enough(setup, line, start, via_s)
+    initial = _time_first_path(setup, line, start)
+    outcome = _improve(setup, line, start, via_s, initial, callback, verbose)
+    if setup.duration is not None and setup.max_iterations > 0 and setup.method == Method.SCP:
+        outcome = _from_free_plan(setup, line, start, via_s, outcome, callback, verbose)
+    timing, reason, message, evaluations, history = outcome
     return _result(setup, timing, initial, history, reason, message, evaluations, via_s)
+
+
+def _from_free_plan(
+    setup: Segment,
+    line: Path,
+    start: Path | None,
+    via_s: tuple[float, ...],
+    first: tuple[TimingResult, StopReason, str, int, list[Iteration]],
+    callback: Callable[[Iteration], None] | None,
+    verbose: bool,
+) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+    """Under a duration, stage 2 again from the plan without it, where that path can be as
+    fast as T, and the lower J of the two runs: stage 2 finds local optima, and for a T near
+    or beyond the free plan's t_e its path is a better start than the first path (a ur5
+    motion at 1.5 times the free plan's t_e: J 3.34 from there)."""
+    free = replace(setup, duration=None)
+    plan_free = _improve(free, line, start, via_s, _time_first_path(free, line, start), None, False)
+    path = plan_free[0].trajectory.path
+    if _fastest(setup, path) > setup.duration[0] or time.perf_counter() >= setup.deadline:
+        return first
+    try:  # (stage 2's coarser grid may time the path a little slower)
+        initial = _time_first_path(setup, path, path)
+        second = _improve(setup, path, path, via_s, initial, callback, verbose)
+    except InfeasiblePathError:
+        return first
+    spent = first[3] + plan_free[3] + second[3]
+    if second[0].J < first[0].J:
+        return (*second[:2], second[2] + "; from the plan without the duration", spent, second[4])
+    return (*first[:3], spent, first[4])
+
+
+def _fast_enough(
+    setup: Segment, line: Path, start: Path | None, via_s: tuple[float, ...]
+) -> tuple[Path, Path | None]:
+    """The first path, if it can be as fast as the plan's duration; else the path stage 2
+    finds for the time-optimal cost (the first path of the plan then), if that can; else
+    InfeasiblePathError with the fastest motion found."""
+    duration = setup.duration[0]
+    fastest = _fastest(setup, line)
+    if fastest <= duration:
+        return line, start
+    quick = replace(setup, cost=TimeCost(), duration=None)
+    timing = _improve(quick, line, start, via_s, _time_first_path(quick, line, start), None, False)[
+        0
+    ]
+    quickest = timing.duration
+    if quickest > duration:
+        raise InfeasiblePathError(
+            f"duration {duration:.6g} s is shorter than the time-optimal motion along the first "
+            f"path ({fastest:.6g} s) and along the fastest path stage 2 found ({quickest:.6g} s)"
+        )
+    return timing.trajectory.path, timing.trajectory.path
 
 
 def _check_duration(setup: Segment, duration: object, max_duration: object) -> tuple[float, bool]:
@@ -252,77 +298,19 @@ def _check_duration(setup: Segment, duration: object, max_duration: object) -> t
         raise ConfigurationError(
             "a duration with jerk limits is not planned yet: give one or the other"
         )
+    if setup.method == Method.PAPER:
+        raise ConfigurationError("a duration needs method 'scp' (the paper's update has none)")
     return (exact, True) if exact is not None else (most, False)
 
 
-def _improve_under_duration(
-    setup: Segment,
-    line: Path,
-    start: Path | None,
-    via_s: tuple[float, ...],
-    initial: TimingResult | None,
-    callback: Callable[[Iteration], None] | None,
-    verbose: bool,
-) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
-    """Stage 2 on the duration's Lagrangian cost (``initial.lagrangian``), then the path found
-    timed to the duration with the plan's cost; then stage 2 on the plan's own cost, and (where
-    no path found so far can be as fast as T) on a quarter and a sixteenth of the Lagrangian's
-    torque weights (time weighs more). The lowest J under the duration is returned, the first
-    path's timing where that is lower. ``initial`` is None where the first path cannot be as
-    fast as T: stage 2 then starts on the time-optimal cost."""
-    n = setup.robot.n
-    t, exact = setup.duration
-    base = setup.cost.torque_weights(n)
-    lagrangian = TimeCost() if initial is None else (initial.lagrangian or setup.cost)
-    rounds = [lagrangian.torque_weights(n)]
-    if not np.array_equal(rounds[0], base):
-        rounds.append(base)
-    rounds += [rounds[0] * 0.25, rounds[0] * 0.0625]
-    best: tuple | None = None
-    evaluations, fastest = 1, np.inf
-    for k, weights in enumerate(rounds):
-        if k >= 2 and best is not None or time.perf_counter() >= setup.deadline:
-            break  # the slower rounds only while no path meets T
-        inner = replace(setup, cost=TorqueCost(weights=weights), duration=None)
-        first = _time_first_path(inner, line, start)
-        timing, reason, message, spent, history = _improve(
-            inner, line, start, via_s, first, callback, verbose
-        )
-        evaluations += spent
-        try:
-            final = _time_first_path(setup, timing.trajectory.path, start)
-        except InfeasiblePathError:  # stage 2's path is slower than T at its fastest
-            fastest = min(fastest, _fastest(setup, timing.trajectory.path))
-            continue
-        if best is None or final.J < best[0].J:
-            best = (final, reason, message, history, weights)
-    if best is None:
-        if initial is None:
-            raise InfeasiblePathError(
-                f"duration {t:.6g} s is shorter than the time-optimal motion along every path "
-                f"stage 2 found, the fastest of which takes {fastest:.6g} s (and the first path)"
-            )
-        return initial, reason, message + NO_PATH_MEETS, evaluations, history
-    final, reason, message, history, weights = best
-    ratio = float(np.max(weights) / np.max(base)) if np.any(base > 0) else float(np.max(weights))
-    message += (
-        f"; stage 2 minimised the Lagrangian of t_e {'=' if exact else '≤'} {t:.6g} s (time "
-        f"+ torque weights × {ratio:.3g}), its path then timed under the duration"
-    )
-    if initial is not None and final.J > initial.J:
-        final = initial
-        message += "; the first path is returned: it costs less under the duration"
-    return final, reason, message, evaluations, history
-
-
 def _fastest(setup: Segment, path: Path) -> float:
-    """t_e of the time-optimal timing of a path on the plan's grid [s]."""
-    return optimal_timing(
-        setup.robot, path, grid=setup.grid, velocity_limits=setup.velocity_limits
-    ).duration
-
-
-NO_PATH_MEETS = "; no path stage 2 found is as fast as the duration: the first path is returned"
+    """t_e of the time-optimal timing of a path [s]: the larger on the plan's grid and on
+    stage 2's iterates' (coarser grids time a path a little slower)."""
+    grids = {setup.grid, min(setup.grid, getattr(setup.options, "grid", setup.grid))}
+    return max(
+        optimal_timing(setup.robot, path, grid=g, velocity_limits=setup.velocity_limits).duration
+        for g in grids
+    )
 
 
 def _setup(
@@ -496,13 +484,22 @@ def _improve(
         try:
             if method == Method.SCP:
                 outcome = sequential_convex(
-                    robot, q0, qe, cost, **common, collisions=collisions, start=start, via=via_s
+                    robot,
+                    q0,
+                    qe,
+                    cost,
+                    **common,
+                    collisions=collisions,
+                    start=start,
+                    via=via_s,
+                    duration=setup.duration,
                 )
                 if goal is not None and optimise_goal and len(history) <= max_iterations:
                     # then θe moves along the pose, from that plan: J can only go down
                     outcome = _free_goal(
-                        robot, q0, qe, cost, goal, outcome, common, history, collisions, via_s
-                    )
+                        robot, q0, qe, cost, goal, outcome, common, history, collisions, via_s,
+                        setup.duration,
+                    )  # fmt: skip
             else:
                 outcome = paper_iterations(robot, initial, cost, **common)
             timing, reason = outcome.timing, outcome.reason
@@ -510,9 +507,7 @@ def _improve(
         except KeyboardInterrupt:  # the best plan so far, timed on the plan's grid
             timing, reason, evaluations = best[0], StopReason.INTERRUPTED, len(history) + 1
             if timing.problem.segments != initial.problem.segments:
-                timing = optimal_timing(
-                    robot, timing.trajectory.path, cost, grid=grid, velocity_limits=velocity_limits
-                )
+                timing = _time_first_path(setup, timing.trajectory.path, start)
             message = f"interrupted after {len(history) - 1} iterations: the best plan so far"
         if timing.J > initial.J:  # e.g. no better path: the line as a B-spline on another grid
             timing = initial
@@ -666,6 +661,7 @@ def _free_goal(
     history: list[Iteration],
     collisions: CollisionModel | None,
     via: tuple[float, ...] = (),
+    duration: tuple[float, bool] | None = None,
 ) -> MethodOutcome:
     """Stage 2 continued from ``first`` with θe free along the goal pose; its iterates follow
     the first run's in the history (its iterate 0, the same path, is not repeated)."""
@@ -689,6 +685,7 @@ def _free_goal(
         start=first.timing.trajectory.path,
         goal=goal,
         via=via,
+        duration=duration,
     )
     if second.timing.J > first.timing.J:  # e.g. re-timed on another grid: keep the first
         return first

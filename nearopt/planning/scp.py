@@ -53,6 +53,8 @@ from ..robot.kinematics import ToolPose, inverse_kinematics, task_jacobian
 from ..timing import (
     Discretisation,
     LinearRows,
+    duration_gradient,
+    duration_of,
     is_solved,
     optimal_timing,
     solve_conic,
@@ -95,6 +97,7 @@ def sequential_convex(
     start: BSplinePath | None = None,
     goal: ToolPose | None = None,
     via: tuple[float, ...] = (),
+    duration: tuple[float, bool] | None = None,
 ) -> MethodOutcome:
     """Improve the path from the straight line by sequential convex programming.
 
@@ -130,6 +133,9 @@ def sequential_convex(
     via
         Path parameters σ_v where the path must keep its current configuration (via-points
         passed through: Σ_j B_j(σ_v) Δc_j = 0, exact since linear); ``start`` goes through them.
+    duration
+        (T, exact): every iterate timed with t_e = T (or ≤ T); the model keeps t_e, linearised
+        at the iterate's timing, at T (:func:`_with_duration`; every trial is timed exactly).
     """
     weights = cost.torque_weights(robot.n) if isinstance(cost, TorqueCost) else None
     if weights is None:
@@ -144,14 +150,13 @@ def sequential_convex(
         end = ends[1:] if goal is None else p[-n:][None, :]
         return BSplinePath(np.vstack([ends[:1], p[: k_count * n].reshape(k_count, n), end]), breaks)
 
-    time_it = _timer(robot, cost, velocity_limits, path_of, iterate_grid)
+    time_it = _timer(robot, cost, velocity_limits, path_of, iterate_grid, duration)
 
     p = start.control_points[1 : -1 if goal is None else None].ravel()
     timing = time_it(p)
     evaluations, index, small, failures = 1, 0, 0, 0
     run.report(0, timing, None, start)
-    basis = None
-    moving = p.size // n  # the interior control points, and θe with a goal pose
+    basis, moving = None, p.size // n  # moving: the interior control points (and θe, a pose)
     radius = np.full(moving, options.trust_radius)  # per control point (see _new_radius)
     reason, message = StopReason.ITERATION_LIMIT, f"{run.max_iterations} iterations"
     while index < run.max_iterations:
@@ -164,7 +169,7 @@ def sequential_convex(
             basis = path_basis(timing.trajectory.path, disc, end=goal is not None)
         bound = np.repeat(radius, n) * scale
         model = _iterate_model(
-            robot, disc, z, basis, p, path_of(p), bound, collisions, start, via, goal
+            robot, disc, z, basis, p, path_of(p), bound, collisions, start, via, goal, duration
         )
         j0 = timing.objective
         step = _solve_model(disc, weights, model, z, p, bound, lower, upper)
@@ -233,15 +238,36 @@ def _first_iterate(
     return BSplinePath.line(q0, qe, k_count, breaks), k_count, breaks
 
 
+def _with_duration(
+    model: _Model,
+    disc: Discretisation,
+    z: NDArray[np.float64],
+    duration: tuple[float, bool],
+    p_size: int,
+) -> _Model:
+    """The model with the duration's row: t_e linearised at the iterate's timing b,
+    t_e(b) + ∇t_e·(b' − b) = T (or ≤ T), in units of T. t_e is convex in b, so the model's
+    timing may last a little longer than T; the trial is timed to it exactly."""
+    b = disc.b(z)
+    grad = duration_gradient(disc.problem, b)[1:-1]
+    t_now = duration_of(disc.problem, b)
+    t, exact = duration
+    row = sp.csr_matrix(np.concatenate([grad, np.zeros(p_size)])[None, :] / t)
+    level = (t - t_now + grad @ z) / t
+    return _with_rows(model, row, np.array([level if exact else -np.inf]), np.array([level]))
+
+
 def _timer(
     robot: Robot,
     cost: Cost,
     velocity_limits: bool,
     path_of: Callable[[NDArray[np.float64]], BSplinePath],
     iterate_grid: int,
+    duration: tuple[float, bool] | None = None,
 ) -> Callable[..., TimingResult]:
     """Stage 1 of the iterate with control points p: on the iterate grid (or ``on``), from the
-    margins of a close timing (``like``) and a guess of b."""
+    margins of a close timing (``like``) and a guess of b; under the duration, if any."""
+    t, exact = duration or (None, False)
 
     def time_it(
         p: NDArray[np.float64],
@@ -257,6 +283,8 @@ def _timer(
             velocity_limits=velocity_limits,
             guess=guess,
             margins=None if like is None else like.problem,
+            duration=t if exact else None,
+            max_duration=None if exact else t,
         )
 
     return time_it
@@ -334,6 +362,7 @@ def _iterate_model(
     start: BSplinePath,
     via: tuple[float, ...],
     goal: ToolPose | None,
+    duration: tuple[float, bool] | None = None,
 ) -> _Model:
     """The convex model at the iterate p (path ``path``, timing z): stage 1's rows linearised in
     the path, the clearances, the via-points kept (B(σ_v) Δp = 0 per joint) and θe kept on the
@@ -355,6 +384,8 @@ def _iterate_model(
         task = task_jacobian(robot, goal, p[-n:])
         rows = sp.hstack([sp.csr_matrix((task.shape[0], p.size - n)), sp.csr_matrix(task)])
         model = _with_rows(model, rows.tocsr(), np.zeros(task.shape[0]), np.zeros(task.shape[0]))
+    if duration is not None:  # t_e, linearised at the iterate's timing, kept at T
+        model = _with_duration(model, disc, z, duration, p.size)
     return model
 
 

@@ -54,7 +54,13 @@ from .between import BetweenSamples, tighten, uniform_slow_down
 from .conic import ConicSolution, is_solved, solve_conic
 from .discretisation import Discretisation, LinearRows, RowBlocks
 from .driver import TimingResult, optimal_timing
-from .duration import DURATION_TOLERANCE, check_duration, duration_of, solve_for_duration
+from .duration import (
+    DURATION_TOLERANCE,
+    check_duration,
+    duration_gradient,
+    duration_of,
+    solve_for_duration,
+)
 from .interior import InteriorSolution, load_kernel, solve_interior
 from .jerk import (
     JerkTiming,
@@ -127,6 +133,7 @@ __all__ = [
     "DURATION_TOLERANCE",
     "check_duration",
     "duration_of",
+    "duration_gradient",
     "solve_for_duration",
     "with_moving_ends",
     "into_limits",

@@ -51,9 +51,9 @@ class TimingResult(MotionCost):
         Time spent [s], building the problem included.
     lagrangian
         With a duration that binds: the cost 1 + Σ w'_i u_i² whose free optimum this timing is
-        (the Lagrangian f0 + μ of the duration, scaled; see :mod:`nearopt.timing.duration`),
-        what stage 2 minimises to plan under the duration; None otherwise (no duration, one
-        that does not bind, or one beyond every optimum of the family).
+        (the Lagrangian f0 + μ of the duration, scaled; see :mod:`nearopt.timing.duration`);
+        None otherwise (no duration, one that does not bind, or one beyond every optimum of
+        the family).
     """
 
     trajectory: Trajectory

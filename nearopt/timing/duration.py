@@ -42,7 +42,13 @@ if TYPE_CHECKING:
 
     from .problem import TimingProblem
 
-__all__ = ["DURATION_TOLERANCE", "check_duration", "solve_for_duration", "duration_of"]
+__all__ = [
+    "DURATION_TOLERANCE",
+    "check_duration",
+    "solve_for_duration",
+    "duration_of",
+    "duration_gradient",
+]
 
 DURATION_TOLERANCE = 1e-9  # relative: the search stops with t_e in [T (1 − this), T]
 MAX_SOLVES = 60  # solves of one search
@@ -252,7 +258,7 @@ def _beyond(
     settles (a fixed point is a KKT point of min J s.t. t_e = T)."""
     found, x_prev, last = slowest, None, math.inf
     for _ in range(CCP_ROUNDS):
-        price = -_duration_gradient(problem, found.b)
+        price = -duration_gradient(problem, found.b)
         reach = max(float(price @ found.b), 1e-300)
         start = math.log(duration / reach) if x_prev is None else x_prev
 
@@ -296,7 +302,7 @@ def _price_root(
     )
 
 
-def _duration_gradient(problem: TimingProblem, b: NDArray[np.float64]) -> NDArray[np.float64]:
+def duration_gradient(problem: TimingProblem, b: NDArray[np.float64]) -> NDArray[np.float64]:
     """∂t_e/∂b_k at every knot (0 at the fixed ends), shape (N+1,) [s³]."""
     lam = np.sqrt(b)
     ds = np.diff(problem.sigma)
