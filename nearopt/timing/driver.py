@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import dataclasses
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
@@ -162,9 +163,13 @@ def optimal_timing(
         if target is None:
             problem, sol, b = _solve_exactly(robot, path, problem, cost, tolerance, guess, deadline)
         else:
-            problem, sol, b, lagrangian = _solve_for_duration(
-                robot, path, problem, cost, tolerance, guess, deadline, target
-            )
+
+            def exactly(prob: TimingProblem, below: float, used: list) -> tuple:
+                return _solve_exactly(
+                    robot, path, prob, cost, tolerance, guess, deadline, target, below, used
+                )
+
+            problem, sol, b, lagrangian = _solve_for_duration(problem, cost, target, exactly)
     except SolverError as exc:
         if exc.status == "MaxTime":  # say the caller's budget, not what was left of it
             raise out_of_time(problem, time_limit) from None
@@ -286,27 +291,21 @@ def _solve_exactly(
 
 
 def _solve_for_duration(
-    robot: Robot,
-    path: Path,
     problem: TimingProblem,
     cost: Cost,
-    tolerance: float,
-    guess: NDArray[np.float64] | None,
-    deadline: float,
     target: tuple[float, bool],
+    exactly: Callable[[TimingProblem, float, list], tuple],
 ) -> tuple[TimingProblem, TimingSolution, NDArray[np.float64], TorqueCost | None]:
-    """:func:`_solve_exactly` with a duration (T, exact), and the Lagrangian cost it settled
-    on (see :attr:`TimingResult.lagrangian`). Where the uniform slow-down that keeps
-    a motion at rest within its limits between the samples lengthened it past T, the search
-    aims that much lower and runs again (at most twice more); a motion at rest is then slowed
-    down to exactly T where the bound binds (b → αb, α ≤ 1: every torque stays between
-    gravity's and the motion's)."""
+    """:func:`_solve_exactly` with a duration (T, exact) — ``exactly(problem, below, used)`` —
+    and the Lagrangian cost it settled on (see :attr:`TimingResult.lagrangian`). Where the
+    uniform slow-down that keeps a motion at rest within its limits between the samples
+    lengthened it past T, the search aims that much lower and runs again (at most twice more);
+    a motion at rest is then slowed down to exactly T where the bound binds (b → αb, α ≤ 1:
+    every torque stays between gravity's and the motion's)."""
     below = 0.0
     for _ in range(3):
         used: list[TorqueCost | None] = [None]
-        solved, sol, b = _solve_exactly(
-            robot, path, problem, cost, tolerance, guess, deadline, target, below, used
-        )
+        solved, sol, b = exactly(problem, below, used)
         over = duration_of(solved, b) / target[0] - 1.0
         if not solved.at_rest or over <= 1e-12:
             break
