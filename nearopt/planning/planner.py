@@ -244,7 +244,8 @@ def _from_free_plan(
     or beyond the free plan's t_e its path is a better start than the first path (a ur5
     motion at 1.5 times the free plan's t_e: J 3.34 from there)."""
     free = replace(setup, duration=None)
-    plan_free = _improve(free, line, start, via_s, _time_first_path(free, line, start), None, False)
+    first_free = _time_first_path(free, line, start)
+    plan_free = _improve(free, line, start, via_s, first_free, None, False)
     path = plan_free[0].trajectory.path
     if _fastest(setup, path) > setup.duration[0] or time.perf_counter() >= setup.deadline:
         return first
@@ -270,10 +271,9 @@ def _fast_enough(
     if fastest <= duration:
         return line, start
     quick = replace(setup, cost=TimeCost(), duration=None)
-    timing = _improve(quick, line, start, via_s, _time_first_path(quick, line, start), None, False)[
-        0
-    ]
-    quickest = timing.duration
+    first = _time_first_path(quick, line, start)
+    timing = _improve(quick, line, start, via_s, first, None, False)[0]
+    quickest = _fastest(setup, timing.trajectory.path)
     if quickest > duration:
         raise InfeasiblePathError(
             f"duration {duration:.6g} s is shorter than the time-optimal motion along the first "
