@@ -243,16 +243,18 @@ def _from_free_plan(
     fast as T, and the lower J of the two runs: stage 2 finds local optima, and for a T near
     or beyond the free plan's t_e its path is a better start than the first path (a ur5
     motion at 1.5 times the free plan's t_e: J 3.34 from there)."""
-    free = replace(setup, duration=None)
-    first_free = _time_first_path(free, line, start)
-    plan_free = _improve(free, line, start, via_s, first_free, None, False)
-    path = plan_free[0].trajectory.path
-    if _fastest(setup, path) > setup.duration[0] or time.perf_counter() >= setup.deadline:
+    if time.perf_counter() >= setup.deadline:
         return first
-    try:  # (stage 2's coarser grid may time the path a little slower)
+    free = replace(setup, duration=None)
+    try:  # (stage 2's coarser grid may time the path a little slower; the time may run out)
+        first_free = _time_first_path(free, line, start)
+        plan_free = _improve(free, line, start, via_s, first_free, None, False)
+        path = plan_free[0].trajectory.path
+        if _fastest(setup, path) > setup.duration[0] or time.perf_counter() >= setup.deadline:
+            return first
         initial = _time_first_path(setup, path, path)
         second = _improve(setup, path, path, via_s, initial, callback, verbose)
-    except InfeasiblePathError:
+    except (InfeasiblePathError, SolverError):
         return first
     spent = first[3] + plan_free[3] + second[3]
     if second[0].J < first[0].J:
@@ -270,6 +272,11 @@ def _fast_enough(
     fastest = _fastest(setup, line)
     if fastest <= duration:
         return line, start
+    if setup.max_iterations == 0:
+        raise InfeasiblePathError(
+            f"duration {duration:.9g} s is shorter than the time-optimal motion along the first "
+            f"path, {fastest:.9g} s"
+        )
     quick = replace(setup, cost=TimeCost(), duration=None)
     first = _time_first_path(quick, line, start)
     timing = _improve(quick, line, start, via_s, first, None, False)[0]
@@ -306,7 +313,9 @@ def _check_duration(setup: Segment, duration: object, max_duration: object) -> t
 def _fastest(setup: Segment, path: Path) -> float:
     """t_e of the time-optimal timing of a path [s]: the larger on the plan's grid and on
     stage 2's iterates' (coarser grids time a path a little slower)."""
-    grids = {setup.grid, min(setup.grid, getattr(setup.options, "grid", setup.grid))}
+    grids = {setup.grid}
+    if setup.max_iterations > 0:  # stage 2 times its iterates on its own grid
+        grids.add(min(setup.grid, getattr(setup.options, "grid", setup.grid)))
     return max(
         optimal_timing(setup.robot, path, grid=g, velocity_limits=setup.velocity_limits).duration
         for g in grids

@@ -318,6 +318,6 @@ def duration_gradient(problem: TimingProblem, b: NDArray[np.float64]) -> NDArray
 
 def _too_short(duration: float, fastest: float) -> InfeasiblePathError:
     return InfeasiblePathError(
-        f"duration {duration:.6g} s is shorter than the time-optimal motion along this path, "
-        f"{fastest:.9g} s: no timing within the limits is that fast"
+        f"duration {duration:.12g} s is shorter than the time-optimal motion along this path, "
+        f"{fastest:.12g} s: no timing within the limits is that fast"
     )
