@@ -50,11 +50,6 @@ class TimingResult(MotionCost):
         As in :class:`~nearopt.timing.TimingSolution`.
     wall_time
         Time spent [s], building the problem included.
-    lagrangian
-        With a duration that binds: the cost 1 + Σ w'_i u_i² whose free optimum this timing is
-        (the Lagrangian f0 + μ of the duration, scaled; see :mod:`nearopt.timing.duration`);
-        None otherwise (no duration, one that does not bind, or one beyond every optimum of
-        the family).
     """
 
     trajectory: Trajectory
@@ -67,7 +62,6 @@ class TimingResult(MotionCost):
     iterations: int
     message: str
     wall_time: float
-    lagrangian: TorqueCost | None = None
 
 
 def optimal_timing(
@@ -159,17 +153,16 @@ def optimal_timing(
     if margins is not None and margins.sigma.size == problem.sigma.size:
         problem = inherit_margins(problem, margins)
     try:
-        lagrangian = None
         if target is None:
             problem, sol, b = _solve_exactly(robot, path, problem, cost, tolerance, guess, deadline)
         else:
 
-            def exactly(prob: TimingProblem, below: float, used: list) -> tuple:
+            def exactly(prob: TimingProblem, below: float) -> tuple:
                 return _solve_exactly(
-                    robot, path, prob, cost, tolerance, guess, deadline, target, below, used
+                    robot, path, prob, cost, tolerance, guess, deadline, target, below
                 )
 
-            problem, sol, b, lagrangian = _solve_for_duration(problem, cost, target, exactly)
+            problem, sol, b = _solve_for_duration(problem, cost, target, exactly)
     except SolverError as exc:
         if exc.status == "MaxTime":  # say the caller's budget, not what was left of it
             raise out_of_time(problem, time_limit) from None
@@ -189,7 +182,6 @@ def optimal_timing(
         iterations=sol.iterations,
         message=sol.message,
         wall_time=time.perf_counter() - t0,
-        lagrangian=lagrangian,
     )
 
 
@@ -220,12 +212,10 @@ def _solve_exactly(
     deadline: float,
     target: tuple[float, bool] | None = None,
     below: float = 0.0,
-    used: list[TorqueCost | None] | None = None,
 ) -> tuple[TimingProblem, TimingSolution, NDArray[np.float64]]:
     """Solve on the grid, then keep the limits between samples (see :func:`optimal_timing`);
     with a duration ``target`` (T, exact), every solve is a search over the cost's weights
-    (:func:`~nearopt.timing.duration.solve_for_duration`) aiming ``below`` (a fraction) under T,
-    the cost it settled on put in ``used[0]``.
+    (:func:`~nearopt.timing.duration.solve_for_duration`) aiming ``below`` (a fraction) under T.
 
     Returns the problem last solved (margins tightened), its solution and the b returned.
     """
@@ -255,11 +245,9 @@ def _solve_exactly(
     def timed(prob: TimingProblem, start: NDArray | None) -> TimingSolution:
         if target is None:
             return plain(prob, cost, start)
-        found, weights = solve_for_duration(
+        found, _ = solve_for_duration(
             prob, cost, target[0], exact=target[1], solve=plain, guess=start, below=below
         )
-        if used is not None:
-            used[0] = None if weights is cost else weights
         return found
 
     sol = timed(problem, guess)
@@ -299,18 +287,16 @@ def _solve_for_duration(
     problem: TimingProblem,
     cost: Cost,
     target: tuple[float, bool],
-    exactly: Callable[[TimingProblem, float, list], tuple],
-) -> tuple[TimingProblem, TimingSolution, NDArray[np.float64], TorqueCost | None]:
-    """:func:`_solve_exactly` with a duration (T, exact) — ``exactly(problem, below, used)`` —
-    and the Lagrangian cost it settled on (see :attr:`TimingResult.lagrangian`). Where the
-    uniform slow-down that keeps a motion at rest within its limits between the samples
+    exactly: Callable[[TimingProblem, float], tuple],
+) -> tuple[TimingProblem, TimingSolution, NDArray[np.float64]]:
+    """:func:`_solve_exactly` with a duration (T, exact) — ``exactly(problem, below)``. Where
+    the uniform slow-down that keeps a motion at rest within its limits between the samples
     lengthened it past T, the search aims that much lower and runs again (at most twice more);
     a motion at rest is then slowed down to exactly T where the bound binds (b → αb, α ≤ 1:
     every torque stays between gravity's and the motion's)."""
     below = 0.0
     for _ in range(3):
-        used: list[TorqueCost | None] = [None]
-        solved, sol, b = exactly(problem, below, used)
+        solved, sol, b = exactly(problem, below)
         over = duration_of(solved, b) / target[0] - 1.0
         if not solved.at_rest or over <= 1e-12:
             break
@@ -319,7 +305,7 @@ def _solve_for_duration(
         b = _slowed_to(solved, b, target, below)
     # the user's J on the grid, not that of the weights searched
     objective = Discretisation.of(solved).objective(b[1:-1], cost)[0]
-    return solved, dataclasses.replace(sol, objective=objective), b, used[0]
+    return solved, dataclasses.replace(sol, objective=objective), b
 
 
 MOVING_EXCESS = 1e-9  # the slow-down a motion with moving ends is left without (see above)
