@@ -269,7 +269,8 @@ def _solve_exactly(
         sol = timed(problem, sol.b)
     else:
         b = uniform_slow_down(between, sol.b)
-        shrink = 1.0 - float(np.min(b / np.maximum(sol.b, 1e-300)))
+        moving = sol.b > 0.0  # (a rest end's b = 0 stays 0)
+        shrink = 1.0 - float(np.min(b[moving] / sol.b[moving], initial=1.0))
         if not problem.at_rest:
             # an excess a slow-down by ≤ 1e-7 would take back is within verify's tolerance
             # (1e-6 of a limit): the motion is left as it is; more is an error
