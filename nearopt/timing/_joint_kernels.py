@@ -68,8 +68,8 @@ def assemble(
     x, nu, s_hi, s_lo, y_hi, y_lo,
     indptr, indices, data, lo, hi, fin_lo, fin_hi,
     e_mat, e_rhs,
-    t_count, t_scale, u0, t_weight, t_seg, ds, z_scale, f_scale, nz, group_start, group_rows,
-    position, newton, grad, r_hi, r_lo, r_e, r_d,
+    t_count, t_scale, u0, t_weight, t_seg, ds, z_scale, lam_ends, lin, f_scale, nz,
+    group_start, group_rows, position, newton, grad, r_hi, r_lo, r_e, r_d,
 ):  # fmt: skip  # pragma: no cover - compiled
     """F, the residuals (into r_hi, r_lo, r_e, r_d), ∇F (into grad) and the Newton matrix
     ∇²F + Σ_r (y/s)_r a_r a_rᵀ (into ``newton``, zeroed here: its lower band in the order of
@@ -82,6 +82,8 @@ def assemble(
     y = np.empty(big_n)
     for k in range(big_n):
         y[k] = (lam[k - 1] if k >= 1 else 0.0) + (lam[k] if k < nz else 0.0)
+    y[0] += lam_ends[0]  # the fixed ends' λ (0 at rest)
+    y[big_n - 1] += lam_ends[1]
     q = np.zeros(big_n)
     u = np.empty(t_count)
     for r in range(t_count):
@@ -94,6 +96,10 @@ def assemble(
         f += g[k]
     newton[:, :] = 0.0
     grad[:] = 0.0
+    for c in range(x.size):  # F's linear term (a price on p), lin · x
+        if lin[c] != 0.0:
+            f += f_scale * lin[c] * x[c]
+            grad[c] += f_scale * lin[c]
     for j in range(nz):  # ∂g/∂y and ∂²g/∂y² along λ of the two segments at knot j + 1
         gy = -g[j] / y[j] - g[j + 1] / y[j + 1]
         gyy0, gyy1 = 2.0 * g[j] / y[j] ** 2, 2.0 * g[j + 1] / y[j + 1] ** 2

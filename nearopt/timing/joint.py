@@ -3,8 +3,11 @@ primal-dual interior-point method with a banded Newton system in (z, p).
 
 The problem is that of :func:`~nearopt.timing.solve_conic`: over z = b_1 … b_{N−1} and p,
 
-    minimise   F(z, p) = Σ_k 2Δσ_k (1 + Q_k) / y_k,   y_k = √b_k + √b_{k+1},
+    minimise   F(z, p) = Σ_k 2Δσ_k (1 + Q_k) / y_k + c·p,   y_k = √b_k + √b_{k+1},
                Q_k = ½ Σ_i w_i (u_{k⁺,i}² + u_{(k+1)⁻,i}²),   u = T (z, p) + u0,
+
+with b_0, b_N fixed (0 at rest; a moving end's given b) and c a price on p (stage 2's first-order
+term of a moving end's b through the path; 0 otherwise),
     subject to lower ≤ M (z, p) ≤ upper, the torque samples within their limits,
                0 ≤ z ≤ z_upper, p within its bounds,
 
@@ -88,6 +91,8 @@ def solve_joint(
     start: NDArray[np.float64],
     tolerance: float = 1e-9,
     max_iterations: int = 80,
+    b_ends: tuple[float, float] = (0.0, 0.0),
+    p_price: NDArray[np.float64] | None = None,
 ) -> JointSolution:
     """Solve the problem of this module's docstring.
 
@@ -104,8 +109,16 @@ def solve_joint(
         Relative accuracy of F at the answer.
     max_iterations
         Newton iterations before giving up (``converged`` False).
+    b_ends
+        The fixed b_0 and b_N (0 at rest): their √b enter y_0 and y_{N−1} as constants (the
+        rows' terms in them are in ``rows`` and ``torque`` already), as in
+        :func:`~nearopt.timing.solve_conic`.
+    p_price
+        A linear term c·p added to F (shape of p), or None.
     """
-    problem = _Problem((ds, weights, rows, torque, z_upper), p_bounds, torque_limits, start)
+    problem = _Problem(
+        (ds, weights, rows, torque, z_upper), p_bounds, torque_limits, start, (b_ends, p_price)
+    )
     with _one_blas_thread():
         return _iterate(problem, tolerance, max_iterations)
 
@@ -135,16 +148,22 @@ class _Problem:
         p_bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
         torque_limits: tuple[NDArray[np.float64], NDArray[np.float64]],
         start: NDArray[np.float64],
+        extra: tuple = ((0.0, 0.0), None),
     ) -> None:
-        """``model``: (ds, weights, rows, torque, z_upper) of :func:`solve_joint`."""
+        """``model``: (ds, weights, rows, torque, z_upper) of :func:`solve_joint`; ``extra``:
+        its (b_ends, p_price)."""
         ds, weights, rows, torque, z_upper = model
         big_n = ds.size
         self.ds, self.nz, self.big_n = ds, big_n - 1, big_n
+        self.ends = np.sqrt(np.maximum(np.asarray(extra[0], dtype=float), 0.0))  # λ_0, λ_N
         self.z_scale = np.maximum(start, 1e-9 * max(float(np.max(start, initial=0.0)), 1e-300))
         reach = np.maximum(np.abs(p_bounds[0]), np.abs(p_bounds[1]))
         self.p_scale = np.where(np.isfinite(reach) & (reach > 0.0), reach, 1.0)
         columns = np.concatenate([self.z_scale, self.p_scale])
         self.nx = self.nz + self.p_scale.size
+        self.lin = np.zeros(self.nx)  # the price on p, per scaled variable
+        if extra[1] is not None:
+            self.lin[self.nz :] = np.asarray(extra[1], dtype=float) * self.p_scale
         t_rows, t_lo, t_hi, t_scale, t_index = _torque_block(
             weights, torque, torque_limits, columns
         )
@@ -192,12 +211,12 @@ class _Problem:
     def cost(self, x: NDArray[np.float64]) -> float:
         """F at x = Σ_k 2Δσ_k (1 + Q_k) / (λ_k + λ_{k+1}) (not scaled)."""
         lam = np.sqrt(np.maximum(x[: self.nz] * self.z_scale, 0.0))
-        y = np.concatenate([lam, [0.0]]) + np.concatenate([[0.0], lam])
+        y = np.concatenate([lam, [self.ends[1]]]) + np.concatenate([[self.ends[0]], lam])
         q = np.zeros(self.big_n)
         if self.energy:
             u = self.t_scale * (self.top @ x) + self.u0
             q = np.bincount(self.t_seg, 0.5 * self.t_weight * u * u, self.big_n)
-        return float(np.sum(2.0 * self.ds * (1.0 + q) / y))
+        return float(np.sum(2.0 * self.ds * (1.0 + q) / y) + self.lin @ x)
 
 
 def _row_scale(
@@ -399,6 +418,7 @@ def _iterate(pr: _Problem, tolerance: float, max_iterations: int) -> JointSoluti
     sides = (st.s_hi, st.s_lo, st.y_hi, st.y_lo)
     finite = (pr.fin_lo, pr.fin_hi)
     energy = (pr.t_count, pr.t_scale, pr.u0, pr.t_weight, pr.t_seg, pr.ds, pr.z_scale)
+    energy = (*energy, pr.ends, pr.lin)
     for iteration in range(1, max_iterations + 1):
         f, gap, worst, rd_max = kernels.assemble(
             st.x, st.nu, *sides, *csr, pr.lo, pr.hi, *finite, pr.e_dense, pr.e_rhs,
