@@ -428,6 +428,8 @@ def verify_plan(
         collisions=plan.collisions,
         waypoints=plan.waypoints,
         **_duration_asked(plan),
+        qd0=getattr(plan, "qd0", None),
+        qde=getattr(plan, "qde", None),
     )
 
 

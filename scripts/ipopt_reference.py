@@ -43,6 +43,7 @@ import argparse
 import math
 import os
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any
 
@@ -724,6 +725,7 @@ def _initial_guess(
     bump: NDArray[np.float64],
     lo: NDArray[np.float64],
     hi: NDArray[np.float64],
+    ends: tuple[NDArray[np.float64], NDArray[np.float64]] | None = None,
 ) -> NDArray[np.float64]:
     """Nodes on θ0 → θe (+ bump·sin(π s)), timed by s = 3τ² − 2τ³; u = gravity torque, clipped.
 
@@ -735,7 +737,7 @@ def _initial_guess(
     qd = np.outer(ds, qe - q0) + np.outer(np.pi * np.cos(np.pi * s) * ds, bump)
     q = np.clip(q, lo, hi)
     q[0], q[-1] = q0, qe
-    qd[0], qd[-1] = 0.0, 0.0
+    qd[0], qd[-1] = (0.0, 0.0) if ends is None else ends
     mid = 0.5 * (q[:-1] + q[1:])
     lim = robot.limits
     u = np.array([robot.gravity_torque(m) for m in mid])
@@ -760,6 +762,9 @@ def solve_reference(
     max_iter: int = 3000,
     inner_limits: bool = True,
     duration: float | None = None,
+    qd0: ArrayLike | None = None,
+    qde: ArrayLike | None = None,
+    guesses: Sequence[Any] = (),
 ) -> ReferenceSolution:
     """Solve the free-final-time problem by RK4 multiple shooting and IPOPT, from several starts.
 
@@ -800,6 +805,12 @@ def solve_reference(
     duration
         te fixed to this [s] (its bounds both set to it; the starts' te guesses then all T), or
         None: te free.
+    qd0, qde
+        θ̇ at the first and the last node [rad/s] (None: 0, at rest); the starts' guesses take
+        them at their ends.
+    guesses
+        Further starts: motions (callables m(t, order) with ``duration``, and ``torque(t)``, as
+        nearopt's), sampled at the K + 1 nodes and the intervals' midpoints.
 
     Returns
     -------
@@ -841,8 +852,10 @@ def solve_reference(
     ubg = np.tile(np.r_[np.zeros(2 * n), inner_hi], K)
     x_lo = np.tile(np.r_[q_lo, -v_max][:, None], (1, K + 1))
     x_hi = np.tile(np.r_[q_hi, v_max][:, None], (1, K + 1))
-    x_lo[:, 0] = x_hi[:, 0] = np.r_[q0, np.zeros(n)]
-    x_lo[:, -1] = x_hi[:, -1] = np.r_[qe, np.zeros(n)]
+    v0 = np.zeros(n) if qd0 is None else np.asarray(qd0, dtype=float).reshape(n)
+    ve = np.zeros(n) if qde is None else np.asarray(qde, dtype=float).reshape(n)
+    x_lo[:, 0] = x_hi[:, 0] = np.r_[q0, v0]
+    x_lo[:, -1] = x_hi[:, -1] = np.r_[qe, ve]
     u_lo = np.tile(lim.effort_lower[:, None], (1, K))
     u_hi = np.tile(lim.effort_upper[:, None], (1, K))
     te_bounds = TE_BOUNDS if duration is None else (float(duration), float(duration))
@@ -854,12 +867,15 @@ def solve_reference(
     scale = 0.25 * np.abs(qe - q0) + 0.1
     guess_lo, guess_hi = np.maximum(q_lo, -1e6), np.minimum(q_hi, 1e6)
     runs: list[_Start] = []
-    for j in range(starts):
-        factor = 2.0 ** _TE_EXPONENTS[j % len(_TE_EXPONENTS)]
-        te_j = float(np.clip(te0 * factor, 2 * TE_BOUNDS[0], 0.5 * TE_BOUNDS[1]))
-        te_j = te_j if duration is None else float(duration)
-        bump = rng.normal(0.0, scale) if j >= 2 else np.zeros(n)
-        x0 = _initial_guess(robot, q0, qe, K, te_j, bump, guess_lo, guess_hi)
+    for j in range(starts + len(guesses)):
+        if j < starts:
+            factor = 2.0 ** _TE_EXPONENTS[j % len(_TE_EXPONENTS)]
+            te_j = float(np.clip(te0 * factor, 2 * TE_BOUNDS[0], 0.5 * TE_BOUNDS[1]))
+            te_j = te_j if duration is None else float(duration)
+            bump = rng.normal(0.0, scale) if j >= 2 else np.zeros(n)
+            x0 = _initial_guess(robot, q0, qe, K, te_j, bump, guess_lo, guess_hi, (v0, ve))
+        else:
+            x0 = _motion_guess(guesses[j - starts], K, duration)
         sol = nlp.solver(x0=x0, lbx=lbx, ubx=ubx, lbg=lbg, ubg=ubg, p=w)
         stats = nlp.solver.stats()
         status = str(stats["return_status"])
@@ -921,6 +937,19 @@ def solve_reference(
         iterations=run.iterations,
         rejected=len(rejected),
     )
+
+
+def _motion_guess(motion: Any, K: int, duration: float | None) -> NDArray[np.float64]:
+    """The decision vector of a motion sampled at K + 1 equal nodes (torques at the midpoints),
+    te its duration (or ``duration``, the motion stretched to it)."""
+    te = float(motion.duration)
+    t = np.linspace(0.0, te, K + 1)
+    mid = 0.5 * (t[:-1] + t[1:])
+    stretch = 1.0 if duration is None else te / float(duration)
+    q = np.asarray(motion(t, 0), dtype=float)
+    qd = np.asarray(motion(t, 1), dtype=float) * stretch
+    u = np.asarray(motion.torque(mid), dtype=float)
+    return _Transcription.pack(np.hstack([q, qd]).T, u.T, te / stretch)
 
 
 # ---------------------------------------------------------------------------------- re-simulation

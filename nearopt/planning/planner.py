@@ -45,6 +45,7 @@ from ..timing import (
     time_with_jerk_limits,
 )
 from ..validate import is_number
+from .ends import check_velocities
 from .paper import paper_iterations
 from .records import (
     MAX_CONTROL_POINTS,
@@ -111,8 +112,10 @@ def plan(
     via: Sequence[ArrayLike | ToolPose] | None = (),
     duration: float | None = None,
     max_duration: float | None = None,
+    qd0: ArrayLike | None = None,
+    qde: ArrayLike | None = None,
 ) -> PlanResult:
-    """Plan a near-optimum motion from rest at θ0 to rest at θe (Sections 4-6).
+    """Plan a near-optimum motion from θ0 to θe, at rest at both by default (Sections 4-6).
 
     Parameters
     ----------
@@ -170,6 +173,13 @@ def plan(
         for the time-optimal cost; stage 2 also runs from the plan without the duration where
         that path can be as fast, and the lower J is returned. ``"scp"`` only; not with jerk
         limits.
+    qd0, qde
+        The joint velocities θ̇(0) and θ̇(t_e) [rad/s or m/s], shape (n,); None (or zeros): at
+        rest there. Every path leaves θ0 along qd0 and reaches θe along qde (its first and last
+        interior control points on those rays, :mod:`nearopt.planning.ends`), and stage 1 times
+        it with b_0 = (qd0·θ'/|θ'|²)²; the first path is the straight line with those ends (its
+        end legs turned along them). Within the speed limits; ``"scp"`` only; not yet with
+        via-points, obstacles or jerk limits.
 
     Returns
     -------
@@ -219,6 +229,8 @@ def plan(
     )
     if duration is not None or max_duration is not None:
         setup = replace(setup, duration=_check_duration(setup, duration, max_duration))
+    if qd0 is not None or qde is not None:
+        setup = replace(setup, ends=_check_ends(setup, qd0, qde))
     line, start, via_s = first_path(setup)
     if setup.duration is not None:
         line, start = _fast_enough(setup, line, start, via_s)
@@ -310,6 +322,30 @@ def _check_duration(setup: Segment, duration: object, max_duration: object) -> t
     return (exact, True) if exact is not None else (most, False)
 
 
+def _check_ends(
+    setup: Segment, qd0: object, qde: object
+) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
+    """(qd0, qde) of :func:`plan`'s arguments (None: at rest); ConfigurationError for a bad
+    value (naming the joint) or what moving ends are not planned with yet."""
+    ends = check_velocities(setup.robot, qd0, qde, setup.velocity_limits)
+    if ends[0] is None and ends[1] is None:
+        return ends
+    what = None
+    if setup.method == Method.PAPER:
+        what = "method 'paper' (the straight line's update keeps rest ends); use method='scp'"
+    elif np.any(np.isfinite(setup.robot.limits.jerk)):
+        what = "jerk limits (they start and end at rest)"
+    elif setup.collisions is not None:
+        what = "obstacles or self-collision checks"
+    elif setup.vias:
+        what = "via-points"
+    elif setup.options.control_points < 4:
+        what = "fewer than 4 interior control points"
+    if what is not None:
+        raise ConfigurationError(f"boundary velocities (qd0, qde) are not planned with {what}")
+    return ends
+
+
 def _fastest(setup: Segment, path: Path) -> float:
     """t_e of the time-optimal timing of a path [s]: the larger on the plan's grid and on
     stage 2's iterates' (coarser grids time a path a little slower)."""
@@ -317,7 +353,14 @@ def _fastest(setup: Segment, path: Path) -> float:
     if setup.max_iterations > 0:  # stage 2 times its iterates on its own grid
         grids.add(min(setup.grid, getattr(setup.options, "grid", setup.grid)))
     return max(
-        optimal_timing(setup.robot, path, grid=g, velocity_limits=setup.velocity_limits).duration
+        optimal_timing(
+            setup.robot,
+            path,
+            grid=g,
+            velocity_limits=setup.velocity_limits,
+            qd0=setup.ends[0],
+            qde=setup.ends[1],
+        ).duration
         for g in grids
     )
 
@@ -441,9 +484,13 @@ def _time_first_path(setup: Segment, line: Path, start: Path | None) -> TimingRe
             time_limit=deadline - time.perf_counter(),
             duration=t if exact else None,
             max_duration=None if exact else t,
+            qd0=setup.ends[0],
+            qde=setup.ends[1],
         )
     except SolverError as exc:
         what = "the straight line" if start is None else "the collision-free start"
+        if any(v is not None for v in setup.ends):
+            what = "the straight line with the boundary velocities"
         raise SolverError(f"no plan: timing {what} failed: {exc}", status=exc.status) from exc
     return initial
 
@@ -502,12 +549,13 @@ def _improve(
                     start=start,
                     via=via_s,
                     duration=setup.duration,
+                    ends=setup.ends,
                 )
                 if goal is not None and optimise_goal and len(history) <= max_iterations:
                     # then θe moves along the pose, from that plan: J can only go down
                     outcome = _free_goal(
                         robot, q0, qe, cost, goal, outcome, common, history, collisions, via_s,
-                        setup.duration,
+                        setup.duration, setup.ends,
                     )  # fmt: skip
             else:
                 outcome = paper_iterations(robot, initial, cost, **common)
@@ -560,6 +608,8 @@ def _result(
         via_s=via_s,
         jerk_timing=jerk,
         duration_asked=setup.duration,
+        qd0=setup.ends[0],
+        qde=setup.ends[1],
     )
 
 
@@ -671,6 +721,7 @@ def _free_goal(
     collisions: CollisionModel | None,
     via: tuple[float, ...] = (),
     duration: tuple[float, bool] | None = None,
+    ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None] = (None, None),
 ) -> MethodOutcome:
     """Stage 2 continued from ``first`` with θe free along the goal pose; its iterates follow
     the first run's in the history (its iterate 0, the same path, is not repeated)."""
@@ -695,6 +746,7 @@ def _free_goal(
         goal=goal,
         via=via,
         duration=duration,
+        ends=ends,
     )
     if second.timing.J > first.timing.J:  # e.g. re-timed on another grid: keep the first
         return first

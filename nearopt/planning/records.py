@@ -157,6 +157,7 @@ class Segment:
     t_start: float
     deadline: float
     duration: tuple[float, bool] | None = None  # (T, exact): t_e = T, or t_e ≤ T
+    ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None] = (None, None)
 
 
 @dataclass(frozen=True)
@@ -274,6 +275,8 @@ class PlanResult:
         the plan; ``timing`` is then stage 1's timing of the same path without them.
     duration_asked
         The duration asked for [s] and whether exactly (t_e = T) or at most (t_e ≤ T); None.
+    qd0, qde
+        The joint velocities asked for at the start and the end [rad/s or m/s]; None: at rest.
     """
 
     robot: Robot
@@ -292,6 +295,8 @@ class PlanResult:
     via_s: tuple[float, ...] = ()
     jerk_timing: JerkTimingResult | None = None
     duration_asked: tuple[float, bool] | None = None
+    qd0: NDArray[np.float64] | None = None
+    qde: NDArray[np.float64] | None = None
 
     @property
     def final(self) -> TimingResult | JerkTimingResult:

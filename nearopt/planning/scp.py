@@ -60,6 +60,7 @@ from ..timing import (
     solve_conic,
     solve_joint,
 )
+from .ends import MovingEnds, end_terms
 from .linearisation import PathBasis, path_basis, row_path_jacobian
 from .records import MethodOutcome, Run, SCPOptions, StopReason
 
@@ -98,6 +99,7 @@ def sequential_convex(
     goal: ToolPose | None = None,
     via: tuple[float, ...] = (),
     duration: tuple[float, bool] | None = None,
+    ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None] = (None, None),
 ) -> MethodOutcome:
     """Improve the path from the straight line by sequential convex programming.
 
@@ -136,21 +138,27 @@ def sequential_convex(
     duration
         (T, exact): every iterate timed with t_e = T (or ≤ T); the model keeps t_e, linearised
         at the iterate's timing, at T (:func:`_with_duration`; every trial is timed exactly).
+    ends
+        The joint velocities (qd0, qde) at the start and the end [rad/s or m/s], None: at rest
+        there. ``start`` must leave θ0 along qd0 (reach θe along qde); every iterate does (the
+        first and last interior control points on those rays, :mod:`nearopt.planning.ends`).
     """
     weights = cost.torque_weights(robot.n) if isinstance(cost, TorqueCost) else None
     if weights is None:
         raise SolverError("sequential convex programming needs f0 = 1 + Σ w u² (a TorqueCost)")
     n = robot.n
     start, k_count, breaks = _first_iterate(options, q0, qe, start)
-    ends = start.control_points[[0, -1]]
+    fixed = start.control_points[[0, -1]]
     iterate_grid = min(grid, max(options.grid, 4 * k_count))  # ≥ 4 segments per control point
     scale, lower, upper = _trust_scale(robot, q0, qe, k_count, goal is not None, position_limits)
+    kept = MovingEnds(*ends, q0, qe, k_count - 1, goal is not None)
 
     def path_of(p: NDArray[np.float64]) -> BSplinePath:
-        end = ends[1:] if goal is None else p[-n:][None, :]
-        return BSplinePath(np.vstack([ends[:1], p[: k_count * n].reshape(k_count, n), end]), breaks)
+        end = fixed[1:] if goal is None else p[-n:][None, :]
+        inner = p[: k_count * n].reshape(k_count, n)
+        return BSplinePath(np.vstack([fixed[:1], inner, end]), breaks)
 
-    time_it = _timer(robot, cost, velocity_limits, path_of, iterate_grid, duration)
+    time_it = _timer(robot, cost, velocity_limits, path_of, iterate_grid, duration, ends)
 
     p = start.control_points[1 : -1 if goal is None else None].ravel()
     timing = time_it(p)
@@ -169,8 +177,9 @@ def sequential_convex(
             basis = path_basis(timing.trajectory.path, disc, end=goal is not None)
         bound = np.repeat(radius, n) * scale
         model = _iterate_model(
-            robot, disc, z, basis, p, path_of(p), bound, collisions, start, via, goal, duration
-        )
+            robot, disc, z, basis, p, path_of(p), bound, collisions, start, via, goal,
+            duration, (kept, weights),
+        )  # fmt: skip
         j0 = timing.objective
         step = _solve_model(disc, weights, model, z, p, bound, lower, upper)
         if step is None:  # numerical trouble: a smaller step is a better-conditioned model
@@ -187,13 +196,9 @@ def sequential_convex(
             break
         guess = disc.b(z_model)  # stage 1 of the trial starts from the model's timing
         p_trial, trial, timed = _try_step(
-            robot,
-            p + dp,
-            goal,
-            collisions,
-            path_of,
-            lambda q, like=timing, guess=guess: time_it(q, like, guess),
-        )
+            robot, p + dp, goal, collisions, path_of,
+            lambda q, like=timing, guess=guess: time_it(q, like, guess), kept,
+        )  # fmt: skip
         evaluations += timed
         gain = -np.inf if trial is None else j0 - trial.objective
         ratio = gain / (j0 - predicted)
@@ -244,15 +249,18 @@ def _with_duration(
     z: NDArray[np.float64],
     duration: tuple[float, bool],
     p_size: int,
+    end_gradient: NDArray[np.float64] | None = None,
 ) -> _Model:
     """The model with the duration's row: t_e linearised at the iterate's timing b,
     t_e(b) + ∇t_e·(b' − b) = T (or ≤ T), in units of T. t_e is convex in b, so the model's
-    timing may last a little longer than T; the trial is timed to it exactly."""
+    timing may last a little longer than T; the trial is timed to it exactly. With moving ends,
+    ``end_gradient`` is ∂t_e/∂p through b_0 and b_N."""
     b = disc.b(z)
     grad = duration_gradient(disc.problem, b)[1:-1]
     t_now = duration_of(disc.problem, b)
     t, exact = duration
-    row = sp.csr_matrix(np.concatenate([grad, np.zeros(p_size)])[None, :] / t)
+    path_part = np.zeros(p_size) if end_gradient is None else end_gradient
+    row = sp.csr_matrix(np.concatenate([grad, path_part])[None, :] / t)
     level = (t - t_now + grad @ z) / t
     return _with_rows(model, row, np.array([level if exact else -np.inf]), np.array([level]))
 
@@ -264,9 +272,11 @@ def _timer(
     path_of: Callable[[NDArray[np.float64]], BSplinePath],
     iterate_grid: int,
     duration: tuple[float, bool] | None = None,
+    ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None] = (None, None),
 ) -> Callable[..., TimingResult]:
     """Stage 1 of the iterate with control points p: on the iterate grid (or ``on``), from the
-    margins of a close timing (``like``) and a guess of b; under the duration, if any."""
+    margins of a close timing (``like``) and a guess of b; under the duration, if any; with
+    the boundary velocities ``ends``."""
     t, exact = duration or (None, False)
 
     def time_it(
@@ -285,6 +295,8 @@ def _timer(
             margins=None if like is None else like.problem,
             duration=t if exact else None,
             max_duration=None if exact else t,
+            qd0=ends[0],
+            qde=ends[1],
         )
 
     return time_it
@@ -363,12 +375,23 @@ def _iterate_model(
     via: tuple[float, ...],
     goal: ToolPose | None,
     duration: tuple[float, bool] | None = None,
+    ends: tuple[MovingEnds, NDArray[np.float64]] | None = None,
 ) -> _Model:
     """The convex model at the iterate p (path ``path``, timing z): stage 1's rows linearised in
-    the path, the clearances, the via-points kept (B(σ_v) Δp = 0 per joint) and θe kept on the
-    pose (J_task Δθe = 0)."""
+    the path, the clearances, the via-points kept (B(σ_v) Δp = 0 per joint), θe kept on the
+    pose (J_task Δθe = 0) and the ends' directions kept with their b_0, b_N following the path
+    (``ends``: the moving ends and the torque weights, :mod:`nearopt.planning.ends`)."""
     n = robot.n
-    model = _model(disc, z, row_path_jacobian(robot, disc, z, basis, between=False), reach)
+    jac = row_path_jacobian(robot, disc, z, basis, between=False)
+    terms = None
+    if ends is not None and ends[0].moving:
+        terms = end_terms(disc, z, basis, *ends)
+        jac = jac + terms.jacobian
+    model = _model(disc, z, jac, reach)
+    if terms is not None:
+        rows = ends[0].direction_rows(p.size)
+        zero = np.zeros(rows.shape[0])
+        model = replace(_with_rows(model, rows, zero, zero), price=terms.price)
     if collisions is not None:
         model = _with_rows(  # a joint's largest step bound over the control points
             model,
@@ -385,8 +408,21 @@ def _iterate_model(
         rows = sp.hstack([sp.csr_matrix((task.shape[0], p.size - n)), sp.csr_matrix(task)])
         model = _with_rows(model, rows.tocsr(), np.zeros(task.shape[0]), np.zeros(task.shape[0]))
     if duration is not None:  # t_e, linearised at the iterate's timing, kept at T
-        model = _with_duration(model, disc, z, duration, p.size)
+        end_gradient = None
+        if terms is not None:
+            per_end = _end_duration_gradient(disc, z)
+            end_gradient = per_end[0] * terms.gradients[0] + per_end[1] * terms.gradients[1]
+        model = _with_duration(model, disc, z, duration, p.size, end_gradient)
     return model
+
+
+def _end_duration_gradient(disc: Discretisation, z: NDArray[np.float64]) -> tuple[float, float]:
+    """∂t_e/∂b_0 and ∂t_e/∂b_N at the timing z (0 at a rest end) [s³]."""
+    lam = np.sqrt(disc.b(z))
+    ds = np.diff(disc.problem.sigma)
+    first = -ds[0] / ((lam[0] + lam[1]) ** 2 * lam[0]) if lam[0] > 0.0 else 0.0
+    last = -ds[-1] / ((lam[-2] + lam[-1]) ** 2 * lam[-1]) if lam[-1] > 0.0 else 0.0
+    return first, last
 
 
 def _try_step(
@@ -396,13 +432,17 @@ def _try_step(
     collisions: CollisionModel | None,
     path_of: Callable[[NDArray[np.float64]], BSplinePath],
     time_it: Callable[[NDArray[np.float64]], TimingResult],
+    ends: MovingEnds,
 ) -> tuple[NDArray[np.float64] | None, TimingResult | None, int]:
-    """The step's iterate (θe back onto the pose), its timing if it is certified clear and
-    stage 1 times it (None otherwise), and the stage-1 solves spent (0 or 1)."""
+    """The step's iterate (θe back onto the pose, the ends' control points back onto their
+    rays), its timing if it is certified clear and stage 1 times it (None otherwise), and the
+    stage-1 solves spent (0 or 1)."""
     n = robot.n
     if goal is not None:  # back onto the pose (to first order the step never left it)
         end = _onto(robot, goal, p_trial[-n:])
         p_trial = None if end is None else np.concatenate([p_trial[:-n], end])
+    if p_trial is not None and ends.moving:  # (to first order the step kept them there)
+        p_trial = ends.onto_rays(p_trial)
     if p_trial is None or not (
         collisions is None or collisions.path_clearance(path_of(p_trial)).certified
     ):
@@ -629,6 +669,7 @@ class _Model:
     torque: sp.csr_matrix
     torque_const: NDArray[np.float64]
     torque_limits: tuple[NDArray[np.float64], NDArray[np.float64]]
+    price: NDArray[np.float64] | None = None  # a linear term c·Δp of the model's J
 
 
 def _model(
@@ -695,11 +736,14 @@ def _solve_model(
     rows = LinearRows(model.matrix, model.lower, model.upper)
     problem = (disc.ds, weights, rows, (model.torque, model.torque_const), disc.z_upper)
     limits = {"p_bounds": bounds, "torque_limits": model.torque_limits}
-    joint = solve_joint(*problem, **limits, start=z, tolerance=MODEL_TOLERANCE)
+    b_ends = disc.problem.b_ends
+    joint = solve_joint(
+        *problem, **limits, start=z, tolerance=MODEL_TOLERANCE, b_ends=b_ends, p_price=model.price
+    )
     if joint.converged:
         return np.clip(joint.p, *bounds), joint.objective, joint.z
-    for tolerance in (1e-8, 1e-7, 1e-6):
-        sol = solve_conic(*problem, **limits, tolerance=tolerance)
+    for tolerance in (1e-8, 1e-7, 1e-6):  # (without the price on the ends' λ: a fallback)
+        sol = solve_conic(*problem, **limits, tolerance=tolerance, b_ends=b_ends)
         if is_solved(sol.status):
             return np.clip(sol.p, *bounds), sol.objective, sol.z
     return None

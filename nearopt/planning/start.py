@@ -12,10 +12,17 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..collision.sampling import collision_free_path
-from ..errors import CollisionError, ConfigurationError, InfeasiblePathError, SolverError
+from ..errors import (
+    CollisionError,
+    ConfigurationError,
+    InfeasiblePathError,
+    NearoptError,
+    SolverError,
+)
 from ..parallel import in_parallel
 from ..path import BSplinePath, Path, StraightPath
 from ..timing import optimal_timing
+from .ends import leaving_along
 from .records import MAX_CONTROL_POINTS, Method, Run, SCPOptions, Segment
 from .scp import knot_breaks, path_through, sequential_convex
 
@@ -49,6 +56,10 @@ def first_path(setup: Segment) -> tuple[Path, Path | None, tuple[float, ...]]:
     line: Path = StraightPath(q0, qe)
     start = None
     via_s: tuple[float, ...] = ()
+    # moving ends (plan refuses them with via-points and obstacles): the line leaving along them
+    if setup.ends[0] is not None or setup.ends[1] is not None:
+        line = start = _leaving_line(setup)
+        return line, start, via_s
     if vias:
         points = np.vstack([q0, *vias, qe])
         if np.any(np.all(np.diff(points, axis=0) == 0.0, axis=1)):
@@ -212,6 +223,45 @@ def around_obstacles(
         "no B-spline through the via-points keeps the margin along the collision-free legs "
         f"OMPL found (tried up to {min(8 * k0, MAX_CONTROL_POINTS)} control points)"
     )
+
+
+def _leaving_line(setup: Segment) -> BSplinePath:
+    """The straight line with the plan's boundary velocities
+    (:func:`~nearopt.planning.ends.leaving_along`): of the distances along qd0 (qde) of 1, 2, 4
+    and 8 times the line's own second control point, the one stage 1 times at the lowest J on
+    stage 2's grid; stage 1's InfeasiblePathError where it can time none (the arm cannot brake
+    or turn in time on any of them)."""
+    robot, options = setup.robot, setup.options
+    k = options.control_points
+    line = BSplinePath.line(setup.q0, setup.qe, k, knot_breaks(options, k))
+    lower, upper = position_bounds(robot, setup.position_limits)
+    if lower is None or upper is None:
+        lower, upper = np.full(robot.n, -np.inf), np.full(robot.n, np.inf)
+    first_error: NearoptError | None = None
+    best: tuple[float, BSplinePath] | None = None
+    for stretch in (1.0, 2.0, 4.0, 8.0):
+        path = leaving_along(line, *setup.ends, (lower, upper), robot.joint_names, stretch)
+        try:
+            timing = optimal_timing(
+                robot,
+                path,
+                setup.cost,
+                grid=min(setup.grid, options.grid),
+                velocity_limits=setup.velocity_limits,
+                qd0=setup.ends[0],
+                qde=setup.ends[1],
+            )
+        except (InfeasiblePathError, SolverError) as exc:
+            first_error = first_error or exc
+            continue
+        if best is None or timing.J < best[0]:
+            best = (timing.J, path)
+    if best is None:
+        raise InfeasiblePathError(
+            "no plan: the straight line with the boundary velocities (leaving along qd0, "
+            f"arriving along qde) cannot be timed: {first_error}"
+        )
+    return best[1]
 
 
 def position_bounds(
