@@ -119,6 +119,9 @@ class PlanRequest:
         budgets.
     duration, max_duration
         t_e exactly, or at most [s] (one or neither; not for a task).
+    qd0, qde
+        The joint velocities at the start and at the goal [rad/s or m/s; deg/s with ``deg``]
+        (None: at rest; not for a task).
     no_velocity_limits, no_position_limits
         Limits switched off.
     scene, margin, self_collision
@@ -164,6 +167,8 @@ class PlanRequest:
     time_limit: float = 300.0
     duration: float | None = None
     max_duration: float | None = None
+    qd0: tuple[float, ...] | None = None
+    qde: tuple[float, ...] | None = None
     no_velocity_limits: bool = False
     no_position_limits: bool = False
     scene: str | None = None
@@ -410,6 +415,8 @@ _KINDS: dict[str, _Kind] = {
     "time_limit": _Kind.NUMBER,
     "duration": _Kind.NUMBER,
     "max_duration": _Kind.NUMBER,
+    "qd0": _Kind.NUMBERS,
+    "qde": _Kind.NUMBERS,
     "no_velocity_limits": _Kind.FLAG,
     "no_position_limits": _Kind.FLAG,
     "scene": _Kind.TEXT,
@@ -681,6 +688,10 @@ def solve(
             raise ConfigurationError(
                 "a task's duration is not set yet: --duration and --max-duration plan one motion"
             )
+        if request.qd0 is not None or request.qde is not None:
+            raise ConfigurationError(
+                "a task starts and ends at rest: --qd0 and --qde plan one motion"
+            )
         return plan_task(
             prepared.robot,
             prepared.q0,
@@ -698,6 +709,8 @@ def solve(
         via=prepared.via,
         duration=request.duration,
         max_duration=request.max_duration,
+        qd0=None if request.qd0 is None else _joint_values(request.qd0, request.deg),
+        qde=None if request.qde is None else _joint_values(request.qde, request.deg),
         **settings.keywords(),
     )  # type: ignore[arg-type]
 
@@ -778,6 +791,8 @@ def _lock_values(pairs: tuple[str, ...]) -> dict[str, float]:
 PER_JOINT = (
     "q0",
     "qe",
+    "qd0",
+    "qde",
     "weights",
     "effort_limit",
     "velocity_limit",

@@ -230,7 +230,11 @@ def _motion_options(p: argparse.ArgumentParser) -> None:
         help="keep inverse kinematics' goal configuration (by default it moves along "
         "the pose with the path, to lower J)",
     )
-    p.add_argument("--deg", action="store_true", help="q0 and qe are in degrees (default rad)")
+    p.add_argument(
+        "--deg",
+        action="store_true",
+        help="q0, qe, --via are in degrees, --qd0, --qde in deg/s (default rad, rad/s)",
+    )
 
 
 def _planner_options(p: argparse.ArgumentParser) -> None:
@@ -272,6 +276,21 @@ def _planner_options(p: argparse.ArgumentParser) -> None:
         type=float,
         metavar="T",
         help="the motion takes at most T seconds (J minimised under it; time or 1 + Σ w u²)",
+    )
+    p.add_argument(
+        "--qd0",
+        nargs="+",
+        type=float,
+        metavar="V",
+        help="joint velocities at the start [rad/s; deg/s with --deg] (default: at rest); the "
+        "path leaves q0 along them",
+    )
+    p.add_argument(
+        "--qde",
+        nargs="+",
+        type=float,
+        metavar="V",
+        help="joint velocities at the goal [rad/s; deg/s with --deg] (default: at rest)",
     )
     p.add_argument(
         "--acceleration-limit",

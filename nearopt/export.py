@@ -83,7 +83,8 @@ def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | Non
     """The plan as ``{"robot", "joint_names", "cost", "J", "duration", "t", "q", "qd", "qdd",
     "tau", "history": [{"J", "alpha"}, …]}`` (lists of per-sample lists), ``"via": [{"t",
     "q"}, …]`` when the motion passes via-points, and ``"duration_asked": {"seconds",
-    "exact"}`` when its duration was set (t_e = seconds, or at most that).
+    "exact"}`` when its duration was set (t_e = seconds, or at most that), ``"qd0"`` and
+    ``"qde"`` (the joint velocities asked for at the ends) when it starts or ends moving.
 
     A task (:class:`~nearopt.TaskResult`) has, instead of ``"history"`` and ``"via"``,
     ``"targets": [{"name", "t", "q", "stop", "pose", "frame"}, …]`` (``"pose"``: position and
@@ -114,6 +115,10 @@ def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | Non
         asked = getattr(result, "duration_asked", None)
         if asked is not None:
             document["duration_asked"] = {"seconds": asked[0], "exact": asked[1]}
+        for key in ("qd0", "qde"):
+            value = getattr(result, key, None)
+            if value is not None:
+                document[key] = [float(v) for v in value]
         if result.via:  # where the motion passes its via-points
             document["via"] = [
                 {"t": float(t), "q": q.tolist()}

@@ -1,0 +1,131 @@
+"""Whole plans (both stages) that start or end moving: ``plan(…, qd0=…, qde=…)``.
+
+A seeded state of a real motion (a rest-to-rest timing of the straight line q0 → q1, taken
+mid-way) is the start velocity of a motion to a new goal q2 — the re-planning case. Each plan is
+checked through its JSON record (first and last samples' qd), by ``verify_plan`` (limits at
+1 kHz, the end velocities, the forward simulation, J) and against the straight line with the
+same boundary velocities (stage 1 alone): stage 2 may only lower J.
+"""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from conftest import load
+from console import run_cli
+
+import nearopt
+from nearopt.export import json_text
+from nearopt.path import StraightPath
+from nearopt.timing import optimal_timing
+
+ARMS = ("ur5", "panda", "xarm7")  # xarm7: damped joints
+COST = nearopt.TorqueCost(1e-3)
+
+
+def moving_state(name: str, seed: int) -> tuple[nearopt.Robot, np.ndarray, np.ndarray, np.ndarray]:
+    """(robot, θ, θ̇, q2): the state half-way through the time-optimal timing of a straight line
+    between two seeded configurations (within 30 % of each joint's range around its middle), slowed
+    to half its speed, and a third configuration to re-plan to."""
+    robot = load(name)
+    rng = np.random.default_rng(seed)
+    lo = np.maximum(robot.limits.position_lower, -3.0)
+    hi = np.minimum(robot.limits.position_upper, 3.0)
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    q0, q1, q2 = (mid + 0.3 * half * rng.uniform(-1.0, 1.0, robot.n) for _ in range(3))
+    timing = optimal_timing(robot, StraightPath(q0, q1), COST)
+    state = timing.trajectory.states(np.array([0.5 * timing.duration]))
+    return robot, state[0][0], 0.5 * state[1][0], q2
+
+
+def record(result: nearopt.PlanResult) -> dict:
+    return json.loads(json_text(result, rate=1000.0))
+
+
+@pytest.mark.parametrize("name", ARMS)
+def test_a_moving_start_is_kept_and_stage_2_beats_the_line(name: str) -> None:
+    robot, q, qd, q2 = moving_state(name, 3)
+    for qde in (None, 0.5 * qd):
+        result = nearopt.plan(robot, q, q2, COST, qd0=qd, qde=qde, time_limit=60.0)
+        document = record(result)
+        first, last = np.array(document["qd"][0]), np.array(document["qd"][-1])
+        assert np.max(np.abs(first - qd)) <= 1e-9 * np.max(np.abs(qd))
+        assert np.max(np.abs(last - (0.0 if qde is None else qde))) <= 1e-9 * np.max(np.abs(qd))
+        assert document["qd0"] == pytest.approx(list(qd), rel=1e-15)
+        assert ("qde" in document) == (qde is not None)
+        report = nearopt.verify_plan(result)
+        assert report.passed, str(report)
+        assert "end velocities" in str(report)
+        line = nearopt.plan(robot, q, q2, COST, qd0=qd, qde=qde, max_iterations=0)
+        assert nearopt.verify_plan(line).passed
+        assert result.J <= line.J
+        assert result.iterations > 0
+
+
+def test_a_moving_start_under_a_duration_meets_it() -> None:
+    robot, q, qd, q2 = moving_state("ur5", 4)
+    free = nearopt.plan(robot, q, q2, COST, qd0=qd, time_limit=60.0)
+    duration = 1.2 * free.duration
+    result = nearopt.plan(robot, q, q2, COST, qd0=qd, duration=duration, time_limit=60.0)
+    assert result.duration == pytest.approx(duration, rel=1e-9, abs=0.0)
+    report = nearopt.verify_plan(result)
+    assert report.passed and "duration" in str(report), str(report)
+    states = result.trajectory.states(np.array([0.0]))[1][0]
+    assert np.max(np.abs(states - qd)) <= 1e-9 * np.max(np.abs(qd))
+
+
+def test_bad_boundary_velocities_are_refused_naming_the_joint() -> None:
+    robot, q, qd, q2 = moving_state("ur5", 3)
+    names, limit = robot.joint_names, robot.limits.velocity
+    fast = qd.copy()
+    fast[2] = 1.5 * limit[2]
+    at_limit = q.copy()
+    at_limit[1] = robot.limits.position_upper[1]
+    outward = np.zeros(robot.n)
+    outward[1] = 0.5 * limit[1]
+    cases = [
+        ({"qd0": fast}, names[2], "beyond its speed limit"),
+        ({"qde": -fast}, names[2], "beyond its speed limit"),
+        ({"qd0": qd[:3]}, None, "6 finite joint velocities"),
+        ({"qd0": "fast"}, None, "6 finite joint velocities"),
+        ({"q0": at_limit, "qd0": outward}, names[1], "out of its position limits"),
+        ({"qd0": qd, "method": "paper"}, None, "method 'paper'"),
+        ({"qd0": qd, "via": [0.5 * (q + q2)]}, None, "via-points"),
+    ]
+    for options, joint, words in cases:
+        asked = {"q0": q, **options}
+        with pytest.raises(nearopt.ConfigurationError, match=words) as caught:
+            nearopt.plan(robot, asked.pop("q0"), q2, COST, **asked)
+        message = str(caught.value)
+        assert "\n" not in message
+        if joint is not None:
+            assert joint in message, message
+    # zeros are rest: the same plan as without them
+    rest = nearopt.plan(robot, q, q2, COST, max_iterations=0)
+    zeros = nearopt.plan(robot, q, q2, COST, qd0=np.zeros(6), qde=[0.0] * 6, max_iterations=0)
+    assert zeros.J == rest.J and zeros.qd0 is None
+
+
+def test_boundary_velocities_through_the_command_line(tmp_path) -> None:
+    robot, q, qd, q2 = moving_state("ur5", 3)
+    out = tmp_path / "plan.json"
+    numbers = [f"{v:.17g}" for v in np.rad2deg(qd)]
+    run = run_cli(
+        "plan", "--robot", "ur5", "--q0", *map(str, np.rad2deg(q)), "--qe",
+        *map(str, np.rad2deg(q2)), "--deg", "--qd0", *numbers, "--beta", "1e-3",
+        "--max-iterations", "3", "--json", str(out),
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    document = json.loads(out.read_text())
+    assert np.max(np.abs(np.array(document["qd"][0]) - qd)) <= 1e-9 * np.max(np.abs(qd))
+    assert document["qd0"] == pytest.approx(list(qd), rel=1e-12)
+    assert "qde" not in document
+    bad = run_cli(
+        "plan", "--robot", "ur5", "--q0", *map(str, q), "--qe", *map(str, q2),
+        "--qd0", "10", "0", "0", "0", "0", "0",
+    )  # fmt: skip
+    assert bad.returncode != 0
+    assert "beyond its speed limit" in bad.stderr and robot.joint_names[0] in bad.stderr
+    assert "Traceback" not in bad.stderr
