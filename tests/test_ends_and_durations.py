@@ -100,10 +100,9 @@ def test_a_duration_is_met_exactly_and_the_optimum_is_the_references(name: str) 
                 # Clarabel with Σ t_k ≤ T (1 + 1e-6) (at T itself it may call a problem near
                 # the time-optimal one infeasible); its answer lasts t_ref ≈ T (its tolerance
                 # on that row): nearopt's at t_ref is no worse, and Clarabel's is no worse than
-                # ours at T < t_ref
-                reference = solve_timing(
-                    result.problem, cost, method=TimingMethod.SOCP, max_duration=duration * 1.000001
-                )
+                # ours at T < t_ref. Clarabel now and then stops short (InsufficientProgress)
+                # on one such problem: the reference is then the next slack's (2e-6, 5e-6)
+                reference = _reference_within(result.problem, cost, duration)
                 t_ref = float(np.sum(segment_times(result.problem.sigma, reference.b)))
                 assert t_ref == pytest.approx(duration, rel=2e-5)
                 at_ref = optimal_timing(robot, path, cost, duration=t_ref, **ends)
@@ -236,3 +235,16 @@ def test_durations_through_the_command_line_and_their_refusals(tmp_path) -> None
     jerky = robot.with_limits(jerk=1000.0)
     with pytest.raises(nearopt.ConfigurationError, match="jerk limits"):
         nearopt.plan(jerky, q0, qe, duration=1.0)
+
+
+def _reference_within(problem, cost: nearopt.TorqueCost, duration: float):
+    """Clarabel's SOCP with Σ t_k ≤ T (1 + ε), ε = 1e-6, else 2e-6, else 5e-6 (the first it
+    solves)."""
+    for slack in (1e-6, 2e-6):
+        try:
+            return solve_timing(
+                problem, cost, method=TimingMethod.SOCP, max_duration=duration * (1.0 + slack)
+            )
+        except nearopt.SolverError:
+            continue
+    return solve_timing(problem, cost, method=TimingMethod.SOCP, max_duration=duration * 1.000005)
