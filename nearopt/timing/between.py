@@ -191,7 +191,8 @@ class BetweenSamples:
         if self._slope_lines is None:
             p = self.problem
             self._slope_lines = speed_envelope(
-                self._along(p.dtheta[:-1], self.dtheta, p.dtheta[1:])
+                self._along(p.dtheta[:-1], self.dtheta, p.dtheta[1:]),
+                (p.b_ends[0] > 0.0, p.b_ends[1] > 0.0),
             )
         g0, g1 = self._slope_lines
         frac = np.arange(self.points + 2) / (self.points + 1)
@@ -230,7 +231,7 @@ def _curvature(v: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def speed_envelope(
-    slope: NDArray[np.float64],
+    slope: NDArray[np.float64], fixed: tuple[bool, bool] = (False, False)
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Lines above θ'_i² on each interval between the points of a segment.
 
@@ -239,10 +240,21 @@ def speed_envelope(
     the margin e_j = (max(|κ_j|, |κ_{j+1}|) + |κ_{j+1} − κ_j|) / 8 of
     :meth:`BetweenSamples._envelope` (κ its second differences), i.e. below the line from
     G0 = θ'_i(j)² + e_j to G1 = θ'_i(j+1)² + e_j. Returns (G0, G1), each (N, P + 1, n).
+
+    ``fixed`` (start, end): whether b is fixed at σ = 0 (at σ = 1) — a moving end. There the
+    line is exact at the end itself: θ'² lies below the chord plus 4 e t(1 − t) ≤ 4 e t (t the
+    interval's coordinate from that end), so below the line from θ'_i(end)² to the other point's
+    θ'_i² + 4 e. The speed at a moving end is the user's, at most the limit; with the margin
+    there, a start at its speed limit could never be certified.
     """
     g = slope**2
     margin = _margin(g)
-    return g[:, :-1] + margin, g[:, 1:] + margin
+    g0, g1 = g[:, :-1] + margin, g[:, 1:] + margin
+    if fixed[0]:
+        g0[0, 0], g1[0, 0] = g[0, 0], g[0, 1] + 4.0 * margin[0, 0]
+    if fixed[1]:
+        g0[-1, -1], g1[-1, -1] = g[-1, -2] + 4.0 * margin[-1, -1], g[-1, -1]
+    return g0, g1
 
 
 def _margin(v: NDArray[np.float64]) -> NDArray[np.float64]:
@@ -255,7 +267,7 @@ def _margin(v: NDArray[np.float64]) -> NDArray[np.float64]:
 
 
 def speed_lines(
-    g0: NDArray[np.float64], g1: NDArray[np.float64]
+    g0: NDArray[np.float64], g1: NDArray[np.float64], fixed: tuple[bool, bool] = (False, False)
 ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
     """Bounds (B0, B1) on b at both ends of an interval such that b, linear between them,
     keeps b Ĝ ≤ 1 on the whole interval, Ĝ the line from g0 to g1 (≥ 0; any shape).
@@ -264,7 +276,11 @@ def speed_lines(
     under 1/Ĝ in between. Of the tangents at the middle (off by (ΔG/Ĝ)²/4 of 1/Ĝ at both ends)
     and at the end where Ĝ is larger (exact there, off by (ΔG/Ĝ)² at the other end, never
     below 0), the one off by less at its worse end. Where Ĝ = 0 at both ends: inf (no bound).
-    A speed limit v with the line above θ'² of :func:`speed_envelope` gives b ≤ v² B."""
+    A speed limit v with the line above θ'² of :func:`speed_envelope` gives b ≤ v² B.
+
+    ``fixed`` (start, end): b is fixed at σ = 0 (σ = 1), at most 1/Ĝ there; the interval next to
+    it takes the tangent at that end (b may start at the limit and bend away from it along the
+    tangent), unless it falls to 0 within the interval."""
     dg = g1 - g0
     best = (np.full(g0.shape, np.inf), np.full(g0.shape, np.inf))
     best_ratio = np.full(g0.shape, -np.inf)
@@ -280,6 +296,15 @@ def speed_lines(
             better = (g_at > 0.0) & (ratio > best_ratio)
             best = tuple(np.where(better, e, old) for e, old in zip(ends, best, strict=True))
             best_ratio = np.where(better, ratio, best_ratio)
+        for end, at in ((0, (0, 0)), (1, (-1, -1))):
+            if not fixed[end]:
+                continue
+            g_end, g_other = (g0[at], g1[at]) if end == 0 else (g1[at], g0[at])
+            far = 1.0 / g_end - (g_other - g_end) / g_end**2
+            use = (g_end > 0.0) & (far > 0.0)
+            tangent = (1.0 / g_end, far) if end == 0 else (far, 1.0 / g_end)
+            for out, value in zip(best, tangent, strict=True):
+                out[at] = np.where(use, value, out[at])
     return best
 
 

@@ -379,8 +379,10 @@ class Discretisation:
         if limited.size == 0:
             return []
         big_n, points = p.segments, inside.points
+        fixed = (p.b_ends[0] > 0.0, p.b_ends[1] > 0.0)
         starts, ends = speed_lines(
-            *speed_envelope(self._along(p.dtheta, inside.dtheta[: big_n * points], limited))
+            *speed_envelope(self._along(p.dtheta, inside.dtheta[: big_n * points], limited), fixed),
+            fixed,
         )
         v2 = p.velocity[limited] ** 2 * (1.0 - 2.0 * SPEED_SAFETY)
         # every point's bound: the smallest over the joints and the two intervals meeting there
