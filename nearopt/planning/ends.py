@@ -145,20 +145,28 @@ def end_terms(
 
 
 def leaving_along(
+    robot: Robot,
     path: BSplinePath,
-    qd0: NDArray[np.float64] | None,
-    qde: NDArray[np.float64] | None,
+    ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
     bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
-    names: tuple[str, ...],
     stretch: float = 1.0,
+    velocity_limits: bool = True,
 ) -> BSplinePath:
-    """The straight line ``path`` (a B-spline θ0 → θe) with the boundary velocities: it leaves θ0
-    along qd0 for a distance D — its first two interior control points on that ray, at D/2 and
-    D — then runs straight (control points at their Greville abscissae) to θe, or to the point
-    E before θe on the ray against qde where the last two lie. D (E) is ``stretch`` × the
-    distance of the line's second control point from its end, and no more than the position
-    ``bounds`` (lower, upper) leave room for (convex hull: the whole path stays within them).
-    No curvature at a moving end: the arm turns where stage 1 can slow down for it.
+    """The straight line ``path`` (a B-spline θ0 → θe) with the boundary velocities ``ends``
+    (qd0, qde): it leaves θ0 along qd0 for a distance D — its first interior control point on that
+    ray at D/2, the second near D — then runs straight (control points at their Greville
+    abscissae) to θe, or to the point E before θe where it turns onto the ray against qde.
+    D (E) is ``stretch`` × the distance of the line's second control point from its end, and no
+    more than the position ``bounds`` (lower, upper) leave room for (convex hull: the whole path
+    stays within them).
+
+    The second control point sets the path's curvature at the end (:func:`_turning`): the arm
+    moving at qd0 needs torques H θ̈ + h + g + D θ̇ within its limits, and along a path θ̈ = θ'' b
+    + θ' ṡ̈ has only ṡ̈ free. The curvature is the least whose θ̈ ⊥ θ' leaves the torques a
+    margin in their limits and slows no joint at its speed limit down too late (θ̈ along θ' is
+    stage 1's choice): a moving arm that Coriolis forces would carry out of its torque limits on
+    a straight leg turns the way they push it; one at a speed limit turns so that joint slows.
+    ``velocity_limits``: whether the speed limits are held.
 
     Raises
     ------
@@ -168,37 +176,132 @@ def leaving_along(
     """
     lower, upper = bounds
     points = path.control_points.copy()
+    breaks = path.knots[4:-4] if points.shape[0] > 4 else None
     count = points.shape[0]
-    s = BSplinePath.greville(count, path.knots[4:-4] if count > 4 else None)
+    s = BSplinePath.greville(count, breaks)
     anchors = {0: points[0], count - 1: points[-1]}
-    for qd, end, word in ((qd0, 0, "qd0"), (qde, count - 1, "qde")):
+    for qd, end in zip(ends, (0, count - 1), strict=True):
         if qd is None:
             continue
         step = qd / np.linalg.norm(qd) * (1.0 if end == 0 else -1.0)  # from the end inwards
-        with np.errstate(divide="ignore", invalid="ignore"):
-            room = np.where(
-                step > 0.0,
-                (upper - points[end]) / step,
-                np.where(step < 0.0, (lower - points[end]) / step, np.inf),
-            )
-        if np.min(room) <= 0.0:
-            i = int(np.argmin(room))
-            where = "leave q0 out of" if end == 0 else "reach qe from beyond"
-            raise ConfigurationError(
-                f"{word} of joint {names[i]} is {qd[i]:.6g} rad/s at {points[end][i]:.6g} rad: "
-                f"it would {where} its position limits [{lower[i]:.6g}, {upper[i]:.6g}] rad",
-                joint=names[i],
-            )
+        room = _room(points[end], step, bounds, robot.joint_names, qd, end == 0)
         inner = 2 if end == 0 else count - 3
-        reach = stretch * float(np.linalg.norm(points[inner] - points[end]))
-        reach = min(reach, float(np.min(room)))
-        anchors[inner] = points[end] + reach * step
+        reach = min(stretch * float(np.linalg.norm(points[inner] - points[end])), room)
+        points[inner] = points[end] + reach * step
         points[(1 if end == 0 else count - 2)] = points[end] + 0.5 * reach * step
-    first, last = (2 if qd0 is not None else 0), (count - 3 if qde is not None else count - 1)
+        turn = _turning(robot, BSplinePath(points, breaks), qd, end == 0, velocity_limits)
+        anchors[inner] = np.clip(points[inner] + turn, lower, upper)
+    first = 2 if ends[0] is not None else 0
+    last = count - 3 if ends[1] is not None else count - 1
     a, b = anchors[first], anchors[last]
     for j in range(first, last + 1):
         points[j] = a + (b - a) * (s[j] - s[first]) / (s[last] - s[first])
-    return BSplinePath(points, path.knots[4:-4] if count > 4 else None)
+    return BSplinePath(points, breaks)
+
+
+def _room(
+    at: NDArray[np.float64],
+    step: NDArray[np.float64],
+    bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
+    names: list[str] | tuple[str, ...],
+    qd: NDArray[np.float64],
+    start: bool,
+) -> float:
+    """How far from ``at`` along ``step`` the position bounds leave room [rad]; a
+    ConfigurationError naming the joint where there is none."""
+    lower, upper = bounds
+    with np.errstate(divide="ignore", invalid="ignore"):
+        room = np.where(
+            step > 0.0,
+            (upper - at) / step,
+            np.where(step < 0.0, (lower - at) / step, np.inf),
+        )
+    if np.min(room) <= 0.0:
+        i = int(np.argmin(room))
+        word, where = ("qd0", "leave q0 out of") if start else ("qde", "reach qe from beyond")
+        raise ConfigurationError(
+            f"{word} of joint {names[i]} is {qd[i]:.6g} rad/s at {at[i]:.6g} rad: it would "
+            f"{where} its position limits [{lower[i]:.6g}, {upper[i]:.6g}] rad",
+            joint=names[i],
+        )
+    return float(np.min(room))
+
+
+def _turning(
+    robot: Robot,
+    path: BSplinePath,
+    qd: NDArray[np.float64],
+    start: bool,
+    velocity_limits: bool,
+) -> NDArray[np.float64]:
+    """The shift of the second control point from the end (along a straight end leg) that gives
+    the path at that end the curvature of :func:`leaving_along` [rad]: the least θ̈ ⊥ θ' of an
+    acceleration θ̈ (its part along θ' is stage 1's choice) whose torque H θ̈ + h + g + D θ̇ keeps
+    a margin of 25 % (else 10 %, else none) of each torque range, that keeps any acceleration
+    limit with the same margin, and that does not speed up (at the end: slow down towards the end)
+    a joint at 99 % or more of its speed limit. A small quadratic programme (Clarabel); without a
+    solution, the straight leg (no shift): stage 1 then says where it fails."""
+    s = 0.0 if start else path.s_end
+    q, tangent, curvature = (path(np.array([s]), k)[0] for k in (0, 1, 2))
+    b = float(qd @ tangent / (tangent @ tangent)) ** 2
+    qdd = _end_acceleration(robot, q, qd, tangent, start, velocity_limits)
+    if qdd is None:
+        return np.zeros_like(qd)
+    unit = tangent / np.linalg.norm(tangent)
+    across = (qdd - (qdd @ unit) * unit) / b  # θ'' ⊥ θ' [rad per unit of s²]
+    # θ''(end) is affine in the second control point, with the same factor for every joint
+    moved = path.control_points.copy()
+    moved[2 if start else -3] += 1.0
+    factor = float((BSplinePath(moved, path.knots[4:-4])(np.array([s]), 2)[0] - curvature)[0])
+    return across / factor
+
+
+def _end_acceleration(
+    robot: Robot,
+    q: NDArray[np.float64],
+    qd: NDArray[np.float64],
+    tangent: NDArray[np.float64],
+    start: bool,
+    velocity_limits: bool,
+) -> NDArray[np.float64] | None:
+    """The acceleration θ̈ [rad/s²] of :func:`_turning` at the state (q, qd), or None."""
+    import clarabel
+
+    n = qd.size
+    unit = tangent / np.linalg.norm(tangent)
+    across = np.eye(n) - np.outer(unit, unit)
+    mass, bias = robot.mass_matrix(q), robot.inverse_dynamics(q, qd, np.zeros(n))
+    lim = robot.limits
+    lo, hi = lim.effort_lower, lim.effort_upper
+    speed = lim.velocity if velocity_limits else np.full(n, np.inf)
+    fast = np.flatnonzero(np.abs(qd) >= 0.99 * speed)
+    sign = np.sign(qd[fast]) * (1.0 if start else -1.0)  # s_i θ̈_i ≤ 0 (≥ 0 at the end)
+    settings = clarabel.DefaultSettings()
+    settings.verbose = False
+    for share in (0.25, 0.1, 0.0):
+        margin = share * (hi - lo)
+        rows = [mass, -mass, np.eye(n), -np.eye(n), np.eye(n)[fast] * sign[:, None]]
+        rhs = [
+            hi - margin - bias,
+            bias - lo - margin,
+            (1.0 - 2.0 * share) * lim.acceleration,
+            (1.0 - 2.0 * share) * lim.acceleration,
+            np.zeros(fast.size),
+        ]
+        a, r = np.vstack(rows), np.concatenate(rhs)
+        keep = np.isfinite(r)
+        solver = clarabel.DefaultSolver(
+            sp.csc_matrix(np.triu(2.0 * across)),
+            np.zeros(n),
+            sp.csc_matrix(a[keep]),
+            r[keep],
+            [clarabel.NonnegativeConeT(int(keep.sum()))],
+            settings,
+        )
+        sol = solver.solve()
+        if sol.status == clarabel.SolverStatus.Solved:
+            return np.asarray(sol.x)
+    return None
 
 
 def check_velocities(

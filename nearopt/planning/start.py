@@ -240,7 +240,9 @@ def _leaving_line(setup: Segment) -> BSplinePath:
     first_error: NearoptError | None = None
     best: tuple[float, BSplinePath] | None = None
     for stretch in (1.0, 2.0, 4.0, 8.0):
-        path = leaving_along(line, *setup.ends, (lower, upper), robot.joint_names, stretch)
+        path = leaving_along(
+            robot, line, setup.ends, (lower, upper), stretch, setup.velocity_limits
+        )
         try:
             timing = optimal_timing(
                 robot,
