@@ -20,14 +20,22 @@ from typing import TYPE_CHECKING, Literal
 import numpy as np
 
 from .errors import ConfigurationError
-from .validate import check_rate
+from .validate import check_rate, is_number
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
 
     from .path import Path
 
-__all__ = ["Motion", "MotionCost", "Trajectory", "ChainedTrajectory", "Samples", "segment_times"]
+__all__ = [
+    "Motion",
+    "MotionCost",
+    "MotionPart",
+    "Trajectory",
+    "ChainedTrajectory",
+    "Samples",
+    "segment_times",
+]
 
 InverseDynamics = Callable[
     ["NDArray[np.float64]", "NDArray[np.float64]", "NDArray[np.float64]"], "NDArray[np.float64]"
@@ -143,6 +151,11 @@ class Motion:
         peak = np.maximum(np.max(np.abs(after), axis=0), np.max(np.abs(before), axis=0))
         switch = np.any(np.abs(after - before) > threshold * peak, axis=1)
         return np.diff(np.concatenate([[0.0], knots[switch], [self.duration]]))
+
+    def until(self, t: float) -> MotionPart:
+        """The motion's first ``t`` seconds [s], 0 < t ≤ t_e: where a plan was interrupted (the
+        arm then moves on with θ(t), θ̇(t); re-plan from them with ``plan(…, qd0=θ̇(t))``)."""
+        return MotionPart(self, t)
 
     def faithful_rate(self, threshold: float = 0.1) -> float:
         """The sampling rate [Hz] below which samples can miss a phase: 1 / the shortest phase."""
@@ -276,13 +289,14 @@ class Trajectory(Motion):
 
 
 class ChainedTrajectory(Motion):
-    """Motions one after another, each from rest to rest: the whole motion of a task whose
-    targets the arm stops at (:func:`~nearopt.plan_task`).
+    """Motions one after another: the whole motion of a task whose targets the arm stops at
+    (:func:`~nearopt.plan_task`), or a plan cut short and the plan that took over from its moving
+    state (``ChainedTrajectory([first.until(t), replanned])``).
 
     Parameters
     ----------
     parts
-        The motions in order; each starts at rest where the previous one ends at rest.
+        The motions in order; each starts where the previous one ends (at rest, or moving on).
     joined
         Check that each part starts where the previous one ends (False: pieces drawn side by
         side, e.g. the first paths of a task's segments, which need not join where a goal
@@ -355,6 +369,43 @@ class ChainedTrajectory(Motion):
             if hasattr(part, "jerk"):
                 out[mask] = part.jerk(t[mask] - self.starts[index])
         return out
+
+
+class MotionPart(Motion):
+    """The first ``end`` seconds of a motion (:meth:`Motion.until`): it ends at θ(end), θ̇(end),
+    moving unless ``end`` = t_e.
+
+    Raises
+    ------
+    ConfigurationError
+        If ``end`` is not a time in (0, t_e] [s].
+    """
+
+    def __init__(self, motion: Motion, end: float) -> None:
+        if not is_number(end) or not 0.0 < float(end) <= motion.duration:
+            raise ConfigurationError(
+                f"a motion of {motion.duration:.6g} s is cut at a time in (0, "
+                f"{motion.duration:.6g}] s, got {end!r:.40}"
+            )
+        end = float(end)
+        self.motion = motion
+        self.t = np.append(motion.t[motion.t < end], end)
+        self.t.setflags(write=False)
+        self._inverse_dynamics = motion._inverse_dynamics
+
+    def states(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
+        """θ(t), θ̇(t), θ̈(t) of the motion for t in [0, end], each of shape (M, n)."""
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        return self.motion.states(t)
+
+    def jerk(self, t: ArrayLike) -> NDArray[np.float64]:
+        """θ⃛(t) of the motion if it has one (a jerk-limited timing), inf otherwise (θ̈ jumps
+        at its knots), shape (M, n)."""
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
+        jerk = getattr(self.motion, "jerk", None)
+        if jerk is None:
+            return np.full((t.size, self.states(t[:1])[0].shape[1]), np.inf)
+        return jerk(t)
 
 
 # Gauss-Kronrod 7/15 on [-1, 1] (QUADPACK's qk15): Kronrod nodes and weights, and the weights of

@@ -20,6 +20,7 @@ import nearopt
 from nearopt.export import json_text
 from nearopt.path import StraightPath
 from nearopt.timing import optimal_timing
+from nearopt.trajectory import ChainedTrajectory
 
 ARMS = ("ur5", "panda", "xarm7")  # xarm7: damped joints
 COST = nearopt.TorqueCost(1e-3)
@@ -129,3 +130,39 @@ def test_boundary_velocities_through_the_command_line(tmp_path) -> None:
     assert bad.returncode != 0
     assert "beyond its speed limit" in bad.stderr and robot.joint_names[0] in bad.stderr
     assert "Traceback" not in bad.stderr
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_a_plan_interrupted_and_replanned_is_one_c1_motion(name: str) -> None:
+    """The re-planning case end to end: a plan cut at t_e/2, re-planned from θ, θ̇ there to a new
+    goal; the joined motion is C¹ at the join and passes verify as one motion from rest at q0 to
+    rest at q2 (J of both pieces by verify's own quadrature). The panda's state at the cut has
+    joints at their speed limits."""
+    robot = load(name)
+    rng = np.random.default_rng(11)
+    lo, hi = robot.limits.position_lower, robot.limits.position_upper
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    q0, q1, q2 = (mid + 0.4 * half * rng.uniform(-1.0, 1.0, robot.n) for _ in range(3))
+    first = nearopt.plan(robot, q0, q1, COST, time_limit=60.0)
+    cut = 0.5 * first.duration
+    ran = first.trajectory.until(cut)
+    assert ran.duration == cut and ran.t[-1] == cut and np.all(np.diff(ran.t) > 0.0)
+    q, qd = (x[0] for x in first.trajectory.states(np.array([cut]))[:2])
+    assert np.max(np.abs(qd)) > 0.1  # moving
+    if name == "panda":
+        assert np.max(np.abs(qd) / robot.limits.velocity) >= 1.0 - 1e-4
+    second = nearopt.plan(robot, q, q2, COST, qd0=qd, time_limit=60.0)
+    joined = ChainedTrajectory([ran, second.trajectory])
+    before = ran.states(np.array([cut]))[:2]  # the two pieces at the join
+    after = second.trajectory.states(np.array([0.0]))[:2]
+    assert np.max(np.abs(before[0] - after[0])) <= 1e-12
+    assert np.max(np.abs(before[1] - after[1])) <= 1e-9 * np.max(np.abs(qd))
+    eps = 1e-7 * cut  # and the joined motion across it: θ̇ continuous (jumps O(θ̈ eps))
+    left, right = (joined.states(np.array([t]))[1][0] for t in (cut - eps, cut + eps))
+    assert np.max(np.abs(left - right)) <= 1e-4 * np.max(np.abs(qd))
+    J = ran.integrate(COST) + second.J
+    report = nearopt.verify(joined, robot, rate=1000.0, q0=q0, qe=q2, cost=COST, J=J)
+    assert report.passed, str(report)
+    assert joined.duration == pytest.approx(cut + second.duration, rel=1e-15)
+    with pytest.raises(nearopt.ConfigurationError, match="cut at a time"):
+        first.trajectory.until(2.0 * first.duration)
