@@ -83,7 +83,8 @@ class SCPOptions:
     knots
         Where the B-spline's interior knots lie: ``"clustered"`` at the rest ends like stage 1's
         grid (σ = ½(1 − cos πx), x uniform: where a motion starts and stops, its path bends most)
-        or ``"uniform"``.
+        or ``"uniform"``; a moving end (``qd0``, ``qde``) is never clustered
+        (:func:`~nearopt.planning.scp.knot_breaks`).
     grid
         Stage 1's grid while the path is optimised (≥ 2); the plan's own grid (``plan(grid=)``)
         times the returned path. Optimising on a coarser grid is several times faster and moves

@@ -233,7 +233,8 @@ def _leaving_line(setup: Segment) -> BSplinePath:
     or turn in time on any of them)."""
     robot, options = setup.robot, setup.options
     k = options.control_points
-    line = BSplinePath.line(setup.q0, setup.qe, k, knot_breaks(options, k))
+    moving = (setup.ends[0] is not None, setup.ends[1] is not None)
+    line = BSplinePath.line(setup.q0, setup.qe, k, knot_breaks(options, k, moving))
     lower, upper = position_bounds(robot, setup.position_limits)
     if lower is None or upper is None:
         lower, upper = np.full(robot.n, -np.inf), np.full(robot.n, np.inf)
