@@ -166,3 +166,30 @@ def test_a_plan_interrupted_and_replanned_is_one_c1_motion(name: str) -> None:
     assert joined.duration == pytest.approx(cut + second.duration, rel=1e-15)
     with pytest.raises(nearopt.ConfigurationError, match="cut at a time"):
         first.trajectory.until(2.0 * first.duration)
+
+
+def test_the_replanning_demo_runs_and_its_motion_is_continuous(tmp_path) -> None:
+    """scripts/03_replanning.py: it verifies the joined motion itself; its JSON starts and ends
+    at rest, and θ̇ is continuous across the cut (1 kHz samples: changes of about θ̈ dt)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "03_replanning.py"
+    run = subprocess.run(
+        [sys.executable, str(script), "--out", str(tmp_path)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert run.returncode == 0, run.stderr + run.stdout
+    assert "FAIL" not in run.stdout and "(C¹)" in run.stdout
+    doc = json.loads((tmp_path / "replanning.json").read_text())
+    t, qd, qdd = (np.array(doc[key]) for key in ("t", "qd", "qdd"))
+    assert np.max(np.abs(qd[[0, -1]])) <= 1e-9
+    assert 0.0 < doc["t_cut"] < t[-1]
+    k = int(np.searchsorted(t, doc["t_cut"]))  # the samples around the cut: θ̇ changes by
+    near = slice(k - 2, k + 3)  # no more than the largest θ̈ there allows (a jump would)
+    change = np.abs(np.diff(qd[near], axis=0))
+    assert np.all(change <= 1.5 * np.max(np.abs(qdd[near]), axis=0) * np.max(np.diff(t[near])))
+    assert "meshcat" in (tmp_path / "replanning.html").read_text().lower()
