@@ -45,12 +45,16 @@ __all__ = [
 @dataclass(frozen=True)
 class Waypoint:
     """A point a motion must reach: at ``time`` [s], the configuration ``q`` [rad or m] and/or
-    the frame of ``pose`` at its placement, at rest if ``stop``."""
+    the frame of ``pose`` at its placement, at rest if ``stop``, at the joint velocity ``qd``
+    [rad/s or m/s] if given, and at a ``time`` within ``window`` (earliest, latest) [s] if
+    given."""
 
     time: float
     q: ArrayLike | None = None
     pose: ToolPose | None = None
     stop: bool = False
+    qd: ArrayLike | None = None
+    window: tuple[float, float] | None = None
 
 
 CHUNK = 65536
@@ -795,6 +799,7 @@ def _check_waypoints(
                 f"waypoint {k + 1} at t = {t[k]:.6g} s",
             )
         )
+    _check_passing(checks, robot, waypoints, t, (qd_at, qd_before), tolerance)
     stops = [k for k, w in enumerate(waypoints) if w.stop]
     if stops:
         speed = np.maximum(np.abs(qd_at[stops]), np.abs(qd_before[stops]))
@@ -806,6 +811,50 @@ def _check_waypoints(
                 tolerance,
                 "rad/s",
                 f"waypoint {stops[k] + 1} at t = {t[stops[k]]:.6g} s, joint {names[i]!r}",
+            )
+        )
+
+
+def _check_passing(
+    checks: list[Check],
+    robot: Robot,
+    waypoints: tuple[Waypoint, ...] | list[Waypoint],
+    t: NDArray[np.float64],
+    speeds: tuple[NDArray[np.float64], NDArray[np.float64]],
+    tolerance: float,
+) -> None:
+    """Append the checks of the waypoints' velocities (θ̇ on both sides of the time, against
+    ``qd``) and of their times (within ``window``, to 1e-9 of the latest time or 1e-9 s)."""
+    moving = [k for k, w in enumerate(waypoints) if w.qd is not None]
+    if moving:
+        wanted = np.stack([_velocity(robot, waypoints[k].qd, "a waypoint's qd") for k in moving])
+        gap = np.maximum(*(np.abs(v[moving] - wanted) for v in speeds))
+        k, i = np.unravel_index(np.argmax(gap), gap.shape)
+        checks.append(
+            Check(
+                "velocities at targets",
+                float(gap[k, i]),
+                tolerance,
+                "rad/s",
+                f"waypoint {moving[k] + 1} at t = {t[moving[k]]:.6g} s, "
+                f"joint {robot.joint_names[i]!r}",
+            )
+        )
+    timed = [k for k, w in enumerate(waypoints) if w.window is not None]
+    if timed:
+        late = [
+            (max(waypoints[k].window[0] - t[k], t[k] - waypoints[k].window[1]), k)  # type: ignore[index]
+            for k in timed
+        ]
+        worst, k = max(late)
+        lo, hi = waypoints[k].window  # type: ignore[misc]
+        checks.append(
+            Check(
+                "arrival windows",
+                float(worst),
+                1e-9 * max(1.0, float(np.max(t))),  # a duration is met to 1e-9 relative
+                "s",
+                f"waypoint {k + 1} at t = {t[k]:.9g} s, window [{lo:.9g}, {hi:.9g}] s",
             )
         )
 
