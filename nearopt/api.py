@@ -649,7 +649,13 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
     elif request.qe is not None:
         qe = _joint_values(request.qe, request.deg)
     else:  # every target is checked before any work
-        check_targets(robot, task.targets, q0, where=str(task.source))  # type: ignore[union-attr]
+        check_targets(
+            robot,
+            task.targets,  # type: ignore[union-attr]
+            q0,
+            where=str(task.source),  # type: ignore[union-attr]
+            velocity_limits=not request.no_velocity_limits,
+        )
     scene = Scene.from_file(request.scene) if request.scene is not None else None
     via = [_joint_values(v, request.deg) for v in request.via]
     whole = (robot.n,)

@@ -87,10 +87,12 @@ def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | Non
     ``"qde"`` (the joint velocities asked for at the ends) when it starts or ends moving.
 
     A task (:class:`~nearopt.TaskResult`) has, instead of ``"history"`` and ``"via"``,
-    ``"targets": [{"name", "t", "q", "stop", "pose", "frame"}, …]`` (``"pose"``: position and
-    quaternion (x, y, z, w), and the frame it places; null for a joint target) and
+    ``"targets": [{"name", "t", "q", "stop", "pose", "frame", "velocity", "window"}, …]``
+    (``"pose"``: position and quaternion (x, y, z, w), and the frame it places; null for a joint
+    target; ``"velocity"`` [rad/s] and ``"window"`` [s] as asked, null where not, a window's
+    open end null) and
     ``"segments": [{"t_start", "t_end", "J", "status", "targets", "history"}, …]``: the
-    rest-to-rest pieces, whose boundaries are the targets stopped at.
+    pieces, whose boundaries are the targets stopped at or passed at a velocity.
 
     ``extra`` keys come first (a batch's ``"id"``, ``"request"`` and ``"batch"`` record).
 
@@ -135,6 +137,12 @@ def json_text(result: Plan, rate: float = 1000.0, extra: dict[str, object] | Non
             "frame": (target.goal.frame or result.robot.tip)
             if isinstance(target.goal, ToolPose)
             else None,
+            "velocity": None
+            if target.velocity is None
+            else np.asarray(target.velocity, dtype=float).tolist(),
+            "window": None  # an open end (inf): null
+            if target.window is None
+            else [float(w) if np.isfinite(w) else None for w in target.window],
         }
         for target, t, q in zip(
             result.targets, result.target_times, result.target_configurations, strict=True

@@ -1,24 +1,27 @@
 """Tasks: a sequence of targets (joint vectors or tool poses), passed through or stopped at.
 
-A task is planned as rest-to-rest segments: a segment ends at every target the arm stops at, and
-the targets it passes through on the way are the segment's via-points (:func:`~nearopt.plan`'s
-``via``, exact at every iterate). Segments between stops are independent given the stop
-configurations (the arm is at rest there), so the task's J is the sum of the segments' and each
-segment is planned in turn from where the previous one ended (the last target, if a tool pose,
-optimised along its pose; the stops before it at inverse kinematics' configurations).
+A task is planned as segments: a segment ends at every target the arm stops at or passes at a
+given velocity, and the targets it passes through on the way are the segment's via-points
+(:func:`~nearopt.plan`'s ``via``, exact at every iterate). Segments are independent given the
+state where they meet (θ there, and θ̇ = 0 or the target's velocity), so the task's J is the sum
+of the segments' and each segment is planned in turn from where the previous one ended (the last
+target, if a tool pose, optimised along its pose; the stops before it at inverse kinematics'
+configurations), within its last target's time window if it has one.
 
 A task file (TOML; joint values in ``units``, poses in metres and a quaternion (x, y, z, w) in
 the base frame)::
 
     start = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]   # optional: θ0 (the CLI's --q0)
-    units = "rad"                      # or "deg": of start and every q
+    units = "rad"                      # or "deg": of start, every q and velocity
     frame = "panda_hand_tcp"           # optional: the frame the poses place (default: the tip)
     [[target]]
     name = "approach"
     pose = [0.5, -0.3, 0.25, 1.0, 0.0, 0.0, 0.0]   # x y z [m] (position only) or x y z qx qy qz qw
     stop = false                       # pass through (default: stop)
+    velocity = [0.1, 0.0, 0.0, 0.2, 0.0, 0.1, 0.0]   # optional: at this joint velocity [/s]
     [[target]]
     name = "pick"
+    window = [1.0, 2.0]                # optional: arrive between 1 s and 2 s after the start
     pose = [0.5, -0.3, 0.12, 1.0, 0.0, 0.0, 0.0]
     [[target]]
     name = "home"
@@ -38,7 +41,7 @@ import numpy as np
 
 from ..collision import Clearance, CollisionModel, collisions_for
 from ..cost import Cost, TimeCost
-from ..errors import ConfigurationError, NearoptError, TaskError
+from ..errors import ConfigurationError, InfeasiblePathError, NearoptError, TaskError
 from ..inputs import read_toml
 from ..robot import Robot
 from ..robot.kinematics import ToolPose
@@ -68,11 +71,25 @@ class Target:
         The last target of a task is always a stop (False there is refused).
     name
         A label for reports and files (default ``target <k>``, from 1).
+    velocity
+        Pass through at this joint velocity [rad/s or m/s], shape (n,) (``stop`` must be
+        False). A segment ends there, and the next one starts there moving
+        (:func:`~nearopt.plan`'s ``qde`` and ``qd0``): given θ and θ̇ at the target, the two
+        are independent, so the task's J is still the sum of its segments' optima.
+    window
+        (earliest, latest): when the motion must reach the target [s from the task's start];
+        ``latest`` may be inf. Only for a target that ends a segment (a stop, or one with a
+        velocity): the segment is planned under t_e ≤ latest − its start (``max_duration``),
+        and again under t_e = earliest − its start (``duration``) if it arrives earlier. The
+        segments are planned in order: a window is met by the segment that reaches it, not
+        prepared for by those before.
     """
 
     goal: ArrayLike | ToolPose
     stop: bool = True
     name: str | None = None
+    velocity: ArrayLike | None = None
+    window: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)
@@ -136,11 +153,13 @@ class Task:
                     target=f"target {number}",
                     field="name",
                 )
-            unknown = sorted(set(entry) - {"name", "q", "pose", "stop", "frame"})
+            unknown = sorted(
+                set(entry) - {"name", "q", "pose", "stop", "frame", "velocity", "window"}
+            )
             if unknown:
                 raise TaskError(
                     f"{path}: target {name!r}: unknown field {unknown[0]!r} (the "
-                    "fields are name, q or pose, frame, stop)",
+                    "fields are name, q or pose, frame, stop, velocity, window)",
                     target=name,
                     field=unknown[0],
                 )
@@ -182,8 +201,32 @@ class Task:
                     raise TaskError(
                         f"{path}: target {name!r}: {exc}", target=name, field="pose"
                     ) from None
-            targets.append(Target(goal, stop, name))  # type: ignore[arg-type]
+            velocity = None
+            if "velocity" in entry:
+                velocity = np.array(_numbers(entry["velocity"], path, "velocity", name, None))
+                velocity = velocity * scale
+            window = None
+            if "window" in entry:
+                window = _window(entry["window"], path, name)
+            targets.append(Target(goal, stop, name, velocity, window))  # type: ignore[arg-type]
         return cls(tuple(targets), start, path)
+
+
+def _window(value: object, path: Path, target: str) -> tuple[float, float]:
+    """A task file's window = [earliest, latest] [s] (latest may be inf), else a TaskError."""
+    ok = (
+        isinstance(value, list)
+        and len(value) == 2
+        and all(isinstance(x, int | float) and not isinstance(x, bool) for x in value)
+    )
+    if not ok:
+        raise TaskError(
+            f"{path}: target {target!r}: window must be [earliest, latest] in seconds from the "
+            f"task's start, got {value!r:.80}",
+            target=target,
+            field="window",
+        )
+    return (float(value[0]), float(value[1]))  # type: ignore[index]
 
 
 def _numbers(
@@ -224,7 +267,7 @@ class TaskResult:
     targets
         The task's targets, as given (names filled in).
     segments
-        One plan per rest-to-rest segment, in order.
+        One plan per segment, in order.
     trajectory
         The whole motion: the segments' trajectories one after another.
     status
@@ -314,10 +357,16 @@ class TaskResult:
     @property
     def waypoints(self) -> tuple[Waypoint, ...]:
         """Every target but the last as :func:`~nearopt.verify` checks it: the configuration
-        reached, the pose if it is one, at rest where it is a stop."""
-        return tuple(
+        reached, the pose if it is one, at rest where it is a stop, at its velocity and within
+        its window where it has them; the last target's window, if any, as one more."""
+        out = [
             Waypoint(
-                float(t), q, target.goal if isinstance(target.goal, ToolPose) else None, target.stop
+                float(t),
+                q,
+                target.goal if isinstance(target.goal, ToolPose) else None,
+                target.stop,
+                target.velocity,
+                target.window,
             )
             for t, q, target in zip(
                 self.target_times[:-1],
@@ -325,11 +374,14 @@ class TaskResult:
                 self.targets[:-1],
                 strict=True,
             )
-        )
+        ]
+        if self.targets[-1].window is not None:
+            out.append(Waypoint(self.duration, window=self.targets[-1].window))
+        return tuple(out)
 
     @property
     def parts(self) -> tuple[PlanResult, ...]:
-        """Its rest-to-rest segments, in order."""
+        """Its segments, in order."""
         return self.segments
 
     @property
@@ -427,6 +479,7 @@ def plan_task(
         records,
         q0,
         position_limits=settings.position_limits,
+        velocity_limits=settings.velocity_limits,
         where=None
         if not isinstance(targets, Task) or targets.source is None
         else str(targets.source),
@@ -455,11 +508,12 @@ def plan_task(
 
 
 def _stop_groups(records: tuple[Target, ...]) -> list[list[Target]]:
-    """The targets as rest-to-rest segments: each group ends at a target stopped at."""
+    """The targets as segments: each group ends at a target stopped at or passed at a
+    velocity."""
     groups: list[list[Target]] = [[]]
     for target in records:
         groups[-1].append(target)
-        if target.stop:
+        if target.stop or target.velocity is not None:
             groups.append([])
     return [g for g in groups if g]
 
@@ -477,7 +531,7 @@ def _plan_segments(
     time left shared by the segments still to plan; after a Ctrl-C the rest are timed on their
     first paths. Returns the segments and whether it was interrupted."""
     segments: list[PlanResult] = []
-    start = q0
+    start, moving, begins = q0, None, 0.0
     interrupted = False
     for k, group in enumerate(groups):
         left = settings.time_limit - (time.perf_counter() - t_start)
@@ -493,21 +547,56 @@ def _plan_segments(
             optimise_goal=settings.optimise_goal and k == len(groups) - 1,
             max_iterations=0 if interrupted else settings.max_iterations,
         )
-        via = [t.goal for t in group[:-1]]
-        goal = group[-1].goal
+        begin = (start, moving, begins)
         try:
-            segment = plan(robot, start, goal, cost, callback=forward, via=via, **same.keywords())  # type: ignore[arg-type]
+            segment = _segment(robot, group, begin, cost, {**same.keywords(), "callback": forward})
         except KeyboardInterrupt:  # before the segment had a plan: time its first path only
             interrupted = True
             first = replace(same, max_iterations=0).keywords()
-            segment = plan(robot, start, goal, cost, via=via, **first)  # type: ignore[arg-type]
+            segment = _segment(robot, group, begin, cost, first)
         except NearoptError as exc:  # the same error, saying which segment
             exc.args = (f"segment {k + 1} (to {names}): {exc}", *exc.args[1:])
             raise
         interrupted = interrupted or segment.status == StopReason.INTERRUPTED
         segments.append(segment)
         start = segment.trajectory(segment.duration, 0)[0]
+        moving, begins = group[-1].velocity, begins + segment.duration
     return segments, interrupted
+
+
+def _segment(
+    robot: Robot,
+    group: list[Target],
+    begin: tuple[NDArray[np.float64], ArrayLike | None, float],
+    cost: Cost,
+    keywords: dict,
+) -> PlanResult:
+    """One segment: from ``begin`` = (θ, θ̇ or None at rest, the time it starts [s]) through
+    the group's via-points to its last target — at rest or at its velocity, and within its
+    window if it has one (t_e ≤ latest − start, then t_e = earliest − start if it arrived
+    earlier)."""
+    start, moving, begins = begin
+    last = group[-1]
+    kw = {**keywords, "via": [t.goal for t in group[:-1]], "qd0": moving, "qde": last.velocity}
+    if last.window is None:
+        return plan(robot, start, last.goal, cost, **kw)  # type: ignore[arg-type]
+    lo, hi = (w - begins for w in last.window)
+    window = f"the window [{last.window[0]:.6g}, {last.window[1]:.6g}] s of {last.name!r}"
+    if hi <= 0.0:
+        raise InfeasiblePathError(
+            f"the segment starts at t = {begins:.6g} s, after {window} has closed"
+        )
+    try:
+        if math.isfinite(hi) and hi - lo <= 1e-12 * hi:  # an instant
+            return plan(robot, start, last.goal, cost, duration=hi, **kw)  # type: ignore[arg-type]
+        bound = hi if math.isfinite(hi) else None
+        result = plan(robot, start, last.goal, cost, max_duration=bound, **kw)  # type: ignore[arg-type]
+        if result.duration < lo:
+            result = plan(robot, start, last.goal, cost, duration=lo, **kw)  # type: ignore[arg-type]
+    except NearoptError as exc:
+        exc.args = (f"{exc} (to meet {window}, from t = {begins:.6g} s)", *exc.args[1:])
+        raise
+    return result
 
 
 def check_targets(
@@ -517,10 +606,12 @@ def check_targets(
     *,
     position_limits: bool = True,
     where: str | None = None,
+    velocity_limits: bool = True,
 ) -> None:
     """Check a task's targets against the robot before any planning: joint vectors of the right
-    length, finite and within the position limits, frames the robot has, and no stop where the
-    arm already is (the start, or the previous stop).
+    length, finite and within the position limits, frames the robot has, velocities of the right
+    length within the speed limits, and no stop where the arm already is (the start, or the
+    previous stop).
 
     Raises
     ------
@@ -533,6 +624,8 @@ def check_targets(
     lim = robot.limits
     for target in targets:
         name = target.name
+        if target.velocity is not None:
+            _check_velocity(robot, target, prefix, velocity_limits)
         if isinstance(target.goal, ToolPose):
             try:
                 robot.frame_id(target.goal.frame)
@@ -567,6 +660,32 @@ def check_targets(
                 field="pose" if isinstance(target.goal, ToolPose) else "q",
             )
         previous, previous_name = target.goal, f"target {name!r}"
+
+
+def _check_velocity(robot: Robot, target: Target, prefix: str, velocity_limits: bool) -> None:
+    """A target's velocity: n finite joint velocities within the speed limits (when held);
+    TaskError naming the target (and the joint)."""
+    name = target.name
+    try:
+        v = np.asarray(target.velocity, dtype=float)
+    except (TypeError, ValueError):
+        v = np.full(0, np.nan)
+    if v.shape != (robot.n,) or not np.all(np.isfinite(v)):
+        raise TaskError(
+            f"{prefix}target {name!r}: velocity must be {robot.n} finite joint velocities "
+            f"[rad/s or m/s], got {target.velocity!r:.80}",
+            target=name,
+            field="velocity",
+        )
+    over = np.abs(v) - robot.limits.velocity * (1.0 + 1e-12)
+    if velocity_limits and np.any(over > 0.0):
+        i = int(np.argmax(over))
+        raise TaskError(
+            f"{prefix}target {name!r}: velocity of joint {robot.joint_names[i]!r} is {v[i]:.6g} "
+            f"rad/s, beyond its speed limit {robot.limits.velocity[i]:.6g} rad/s",
+            target=name,
+            field="velocity",
+        )
 
 
 _ORDER = (
@@ -621,8 +740,55 @@ def _targets(targets: Sequence[Target | ArrayLike | ToolPose]) -> tuple[Target, 
                 f"target {k} ({name}) is the last: the motion ends there at rest, so it cannot "
                 "be passed through (stop = false); remove stop = false, or add a target after it"
             )
-        out.append(Target(target.goal, bool(target.stop), name))
+        if target.velocity is not None and target.stop:
+            raise ConfigurationError(
+                f"target {k} ({name}) is a stop with a velocity: the arm is at rest at a stop; "
+                "give stop = false to pass through it at that velocity"
+            )
+        window = None if target.window is None else _checked_window(target, name)
+        out.append(Target(target.goal, bool(target.stop), name, target.velocity, window))
+    _check_segments(out)
     return tuple(out)
+
+
+def _checked_window(target: Target, name: str) -> tuple[float, float]:
+    """A target's window as (earliest, latest) [s]; ConfigurationError naming the target."""
+    try:
+        lo, hi = (float(x) for x in target.window)  # type: ignore[union-attr]
+    except (TypeError, ValueError):
+        raise ConfigurationError(
+            f"target {name!r}: window must be (earliest, latest) in seconds, got "
+            f"{target.window!r:.80}"
+        ) from None
+    if not (math.isfinite(lo) and lo >= 0.0 and hi >= lo and hi > 0.0) or math.isnan(hi):
+        raise ConfigurationError(
+            f"target {name!r}: window ({lo:.6g}, {hi:.6g}) s is not a time window: 0 ≤ "
+            "earliest ≤ latest, earliest finite (latest may be inf), latest > 0"
+        )
+    if not target.stop and target.velocity is None:
+        raise ConfigurationError(
+            f"target {name!r}: a window needs the target to end a segment: stop there, or "
+            "give it a velocity to pass through at (a via-point's time is not planned for)"
+        )
+    return lo, hi
+
+
+def _check_segments(targets: list[Target]) -> None:
+    """A target passed through without a velocity must not lie in a segment that starts or ends
+    moving (moving ends are not planned with via-points yet); ConfigurationError naming it."""
+    moving_start = False
+    group: list[Target] = []
+    for target in targets:
+        group.append(target)
+        if target.stop or target.velocity is not None:
+            if len(group) > 1 and (moving_start or target.velocity is not None):
+                raise ConfigurationError(
+                    f"target {group[0].name!r} is passed through on the way to "
+                    f"{target.name!r} in a segment that starts or ends moving: give it a "
+                    "velocity too, or stop there (a segment with a moving end has no "
+                    "via-points yet)"
+                )
+            moving_start, group = target.velocity is not None, []
 
 
 def check_plan(result: object, what: str = "result") -> None:
