@@ -166,6 +166,13 @@ def test_bad_end_velocities_and_durations_are_named() -> None:
         ({"duration": 1.0, "max_duration": 1.0}, nearopt.ConfigurationError, "not both"),
         ({"duration": -1.0}, nearopt.ConfigurationError, "positive"),
         ({"duration": "soon"}, nearopt.ConfigurationError, "seconds"),
+        ({"duration": "2"}, nearopt.ConfigurationError, "a number of seconds, got '2'"),
+        ({"max_duration": True}, nearopt.ConfigurationError, "a number of seconds, got True"),
+        (
+            {"qd0": 0.5 * direction, "duration": 1e9},
+            nearopt.InfeasiblePathError,
+            "no timing of this path was found that lasts 1000000000 s",
+        ),
     ]
     for options, error, words in cases:
         with pytest.raises(error, match=words) as caught:

@@ -35,6 +35,7 @@ import numpy as np
 from ..cost import Cost, TimeCost, TorqueCost
 from ..errors import ConfigurationError, InfeasiblePathError, SolverError
 from ..trajectory import segment_times
+from ..validate import is_number
 from .solvers import TimingSolution
 
 if TYPE_CHECKING:
@@ -66,10 +67,9 @@ def check_duration(name: str, value: object) -> float | None:
     """A duration [s] as a positive finite float (None stays None); ConfigurationError else."""
     if value is None:
         return None
-    try:
-        t = float(value)  # type: ignore[arg-type]
-    except (TypeError, ValueError):
-        raise ConfigurationError(f"{name} must be a number of seconds, got {value!r:.60}") from None
+    if not is_number(value):  # not a string or a bool that float() would read
+        raise ConfigurationError(f"{name} must be a number of seconds, got {value!r:.60}")
+    t = float(value)  # type: ignore[arg-type]
     if not (math.isfinite(t) and t > 0.0):
         raise ConfigurationError(f"{name} must be a positive, finite number of seconds, got {t!r}")
     return t
@@ -146,7 +146,14 @@ def solve_for_duration(
             high = (rho, *sol_t)
         elif rho > 1e12 or sol_t[0] - low[1] < 1e-6 * (duration - sol_t[0]):
             # t_e no longer grows with ρ: T lies beyond the torque-only optimum's duration
-            return _beyond(problem, solve, duration, sol_t[1], TorqueCost(weights=rho * base))
+            try:
+                return _beyond(problem, solve, duration, sol_t[1], TorqueCost(weights=rho * base))
+            except (InfeasiblePathError, SolverError) as exc:
+                raise InfeasiblePathError(
+                    f"no timing of this path was found that lasts {duration:.12g} s: the slowest "
+                    f"optimum of the cost's family lasts {sol_t[0]:.12g} s, and slowing down "
+                    f"further (a price on speed) failed: {exc}"
+                ) from None
         else:
             low, rho = (rho, *sol_t), rho * 10.0
     return _search(problem, solve, base, duration, low, high)
