@@ -7,12 +7,27 @@ import numpy as np
 
 from .errors import ConfigurationError
 
-__all__ = ["MAX_RATE", "MAX_SAMPLES", "check_rate", "check_samples"]
+__all__ = ["MAX_RATE", "MAX_SAMPLES", "check_rate", "check_samples", "is_number", "real_array"]
 
 MAX_RATE = 1e6
 """[Hz] A sampling or controller rate above a megahertz is a mistake, not a controller."""
 MAX_SAMPLES = 10_000_000
 """Samples of a written motion (rate × t_e) at most: beyond, a file would take gigabytes."""
+
+
+def real_array(value: object) -> np.ndarray | None:
+    """``value`` as an array of floats if it holds real numbers only (ints or floats: not
+    strings, bools or complex numbers, which ``float()`` would read or half-read), else None."""
+    if isinstance(value, str | bytes):
+        return None
+    try:
+        items = np.asarray(value, dtype=object).ravel()  # each element's own type
+        array = np.asarray(value)
+    except (TypeError, ValueError):
+        return None
+    if array.dtype.kind not in "iuf" or any(isinstance(x, bool | np.bool_) for x in items):
+        return None  # (NumPy reads [True, 0] as integers)
+    return array.astype(float)
 
 
 def is_number(value: object) -> bool:

@@ -766,7 +766,10 @@ def _check_waypoints(
     names = list(robot.joint_names)
     t = np.array([w.time for w in waypoints], dtype=float)
     q_at, qd_at, _ = trajectory.states(t)
-    qd_before = trajectory.states(np.maximum(t - 1e-12 * max(1.0, trajectory.duration), 0.0))[1]
+    # θ̇ just before: a few ulps of t earlier (the piece that ends there; 1e-12 of t_e was a
+    # nanosecond at 1000 s, where a braking arm still moves by θ̈·1e-9)
+    before = t - 8.0 * np.spacing(np.maximum(np.abs(t), 1.0))
+    qd_before = trajectory.states(np.maximum(before, 0.0))[1]
     misses = [
         (float(np.max(np.abs(q_at[k] - robot.check_configuration(w.q, "waypoint")))), k)
         for k, w in enumerate(waypoints)

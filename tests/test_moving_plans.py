@@ -91,14 +91,16 @@ def test_bad_boundary_velocities_are_refused_naming_the_joint() -> None:
         ({"qde": -fast}, names[2], "beyond its speed limit"),
         ({"qd0": qd[:3]}, None, "6 finite joint velocities"),
         ({"qd0": "fast"}, None, "6 finite joint velocities"),
-        ({"q0": at_limit, "qd0": outward}, names[1], "out of its position limits"),
+        ({"q0": at_limit, "qd0": outward}, names[1], "on its position limits"),
+        ({"qde": -outward}, names[1], "arrive from beyond them"),
+        ({"qd0": [True, False, 0, 0, 0, 0]}, None, "6 finite joint velocities"),
         ({"qd0": qd, "method": "paper"}, None, "method 'paper'"),
         ({"qd0": qd, "via": [0.5 * (q + q2)]}, None, "via-points"),
     ]
     for options, joint, words in cases:
-        asked = {"q0": q, **options}
+        asked = {"q0": q, "qe": at_limit if "qde" in options else q2, **options}
         with pytest.raises(nearopt.ConfigurationError, match=words) as caught:
-            nearopt.plan(robot, asked.pop("q0"), q2, COST, **asked)
+            nearopt.plan(robot, asked.pop("q0"), asked.pop("qe"), COST, **asked)
         message = str(caught.value)
         assert "\n" not in message
         if joint is not None:
@@ -107,6 +109,9 @@ def test_bad_boundary_velocities_are_refused_naming_the_joint() -> None:
     rest = nearopt.plan(robot, q, q2, COST, max_iterations=0)
     zeros = nearopt.plan(robot, q, q2, COST, qd0=np.zeros(6), qde=[0.0] * 6, max_iterations=0)
     assert zeros.J == rest.J and zeros.qd0 is None
+    # below REST_SPEED in every joint (here 1e-200, whose norm underflows): rest too
+    tiny = nearopt.plan(robot, q, q2, COST, qd0=np.full(6, 1e-200), max_iterations=0)
+    assert tiny.J == rest.J and tiny.qd0 is None
 
 
 def test_boundary_velocities_through_the_command_line(tmp_path) -> None:

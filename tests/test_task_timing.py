@@ -127,3 +127,28 @@ def test_a_velocity_beyond_a_limit_and_a_window_too_soon_name_the_target() -> No
     assert "'target 1'" in str(e.value)
     with pytest.raises(nearopt.InfeasiblePathError, match="window .0, 0.05. s of 'soon'"):
         nearopt.plan_task(robot, START, [Target(GOAL, window=(0.0, 0.05), name="soon")], COST)
+
+
+def test_a_stop_long_after_the_start_verifies_at_rest() -> None:
+    """A window 1000 s after the start: the arm brakes into the stop at ~27 rad/s², so θ̇ a
+    nanosecond before it (1e-12 of t_e, what verify read as "just before") is 3e-8 rad/s;
+    verify reads it a few ulps before and the plan passes."""
+    robot = load("ur5")
+    targets = [Target(PASS, window=(1000.0, np.inf)), Target(STOP)]
+    result = nearopt.plan_task(robot, START, targets, COST)
+    assert result.target_times[0] == pytest.approx(1000.0, rel=1e-9)
+    braking = result.trajectory.states(np.array([result.target_times[0] - 1e-9]))[2][0]
+    assert np.max(np.abs(braking)) > 1.0  # the case: still braking hard just before the stop
+    report = nearopt.verify_plan(result)
+    assert report.passed, str(report)
+
+
+def test_a_velocity_through_a_position_limit_is_refused_up_front() -> None:
+    robot = load("ur5")
+    on = PASS.copy()
+    on[1] = robot.limits.position_upper[1]
+    v = np.zeros(robot.n)
+    v[1] = -0.5  # coming from beyond the limit, or leaving through it: either way
+    with pytest.raises(TaskError, match="on its position limits") as caught:
+        nearopt.plan_task(robot, START, [Target(on, stop=False, velocity=v), Target(GOAL)])
+    assert "'target 1'" in str(caught.value) and robot.joint_names[1] in str(caught.value)

@@ -25,6 +25,7 @@ import scipy.sparse as sp
 
 from ..errors import ConfigurationError
 from ..path import BSplinePath
+from ..validate import real_array
 
 if TYPE_CHECKING:
     from numpy.typing import NDArray
@@ -33,7 +34,15 @@ if TYPE_CHECKING:
     from ..timing import Discretisation
     from .linearisation import PathBasis
 
-__all__ = ["EndTerms", "MovingEnds", "check_velocities", "end_terms", "leaving_along"]
+__all__ = [
+    "EndTerms",
+    "MovingEnds",
+    "check_at_limits",
+    "braking_distance",
+    "check_velocities",
+    "end_terms",
+    "leaving_along",
+]
 
 
 class MovingEnds(NamedTuple):
@@ -149,16 +158,15 @@ def leaving_along(
     path: BSplinePath,
     ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
     bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
-    stretch: float = 1.0,
+    legs: tuple[float, float],
     velocity_limits: bool = True,
 ) -> BSplinePath:
     """The straight line ``path`` (a B-spline θ0 → θe) with the boundary velocities ``ends``
     (qd0, qde): it leaves θ0 along qd0 for a distance D — its first interior control point on that
     ray at D/2, the second near D — then runs straight (control points at their Greville
     abscissae) to θe, or to the point E before θe where it turns onto the ray against qde.
-    D (E) is ``stretch`` × the distance of the line's second control point from its end, and no
-    more than the position ``bounds`` (lower, upper) leave room for (convex hull: the whole path
-    stays within them).
+    D and E are ``legs`` [rad], each no more than the position ``bounds`` (lower, upper) leave
+    room for (convex hull: the whole path stays within them).
 
     The second control point sets the path's curvature at the end (:func:`_turning`): the arm
     moving at qd0 needs torques H θ̈ + h + g + D θ̇ within its limits, and along a path θ̈ = θ'' b
@@ -186,10 +194,13 @@ def leaving_along(
         step = qd / np.linalg.norm(qd) * (1.0 if end == 0 else -1.0)  # from the end inwards
         room = _room(points[end], step, bounds, robot.joint_names, qd, end == 0)
         inner = 2 if end == 0 else count - 3
-        reach = min(stretch * float(np.linalg.norm(points[inner] - points[end])), room)
+        reach = min(legs[0 if end == 0 else 1], room)
         points[inner] = points[end] + reach * step
         points[(1 if end == 0 else count - 2)] = points[end] + 0.5 * reach * step
         turn = _turning(robot, BSplinePath(points, breaks), qd, end == 0, velocity_limits)
+        size = float(np.linalg.norm(turn))  # a bend sharper than the leg is long: the leg's
+        if size > reach:  # (a slow end's curvature costs little; its θ̈ ⊥ θ' / b is noise)
+            turn = turn * (reach / size)
         anchors[inner] = np.clip(points[inner] + turn, lower, upper)
     first = 2 if ends[0] is not None else 0
     last = count - 3 if ends[1] is not None else count - 1
@@ -197,6 +208,27 @@ def leaving_along(
     for j in range(first, last + 1):
         points[j] = a + (b - a) * (s[j] - s[first]) / (s[last] - s[first])
     return BSplinePath(points, breaks)
+
+
+def braking_distance(
+    robot: Robot, q: NDArray[np.float64], qd: NDArray[np.float64] | None, start: bool
+) -> float:
+    """How far along qd the arm at (q, qd) travels while braking to rest as hard as its torque
+    limits allow at that state (at the end: while speeding up to qd) [rad]: |qd|²/(2a), a the
+    largest acceleration against (along) qd whose torque H θ̈ + h + g + D θ̇ is within the
+    limits; inf where there is none, 0 at rest. An estimate of the leg a moving end needs."""
+    if qd is None:
+        return 0.0
+    unit = qd / np.linalg.norm(qd) * (-1.0 if start else 1.0)  # the direction of θ̈
+    push = robot.mass_matrix(q) @ unit
+    bias = robot.inverse_dynamics(q, qd, np.zeros(robot.n))
+    lo, hi = robot.limits.effort_lower, robot.limits.effort_upper
+    with np.errstate(divide="ignore", invalid="ignore"):
+        most = np.where(
+            push > 0.0, (hi - bias) / push, np.where(push < 0.0, (lo - bias) / push, np.inf)
+        )
+    a = float(np.min(most))
+    return float(qd @ qd) / (2.0 * a) if a > 0.0 else np.inf
 
 
 def _room(
@@ -307,7 +339,8 @@ def _end_acceleration(
 def check_velocities(
     robot: Robot, qd0: object, qde: object, velocity_limits: bool
 ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
-    """(qd0, qde) of a plan's arguments as joint vectors, None where at rest (None or zeros);
+    """(qd0, qde) of a plan's arguments as joint vectors, None where at rest (None, or no joint
+    faster than :data:`REST_SPEED`);
     ConfigurationError naming the joint for a wrong shape, a value that is not finite or one
     beyond the joint's speed limit (where those are enforced)."""
     out: list[NDArray[np.float64] | None] = []
@@ -315,11 +348,9 @@ def check_velocities(
         if value is None:
             out.append(None)
             continue
-        try:
-            v = np.asarray(value, dtype=float)
-        except (TypeError, ValueError):
-            v = np.full(0, np.nan)
-        if v.shape != (robot.n,) or not np.all(np.isfinite(v)) or isinstance(value, str):
+        v = real_array(value)
+        v = np.full(0, np.nan) if v is None else v
+        if v.shape != (robot.n,) or not np.all(np.isfinite(v)):
             raise ConfigurationError(
                 f"{name} must be {robot.n} finite joint velocities [rad/s or m/s], got "
                 f"{value!r:.80}"
@@ -333,5 +364,42 @@ def check_velocities(
                 f"limit {limit[i]:.6g} rad/s",
                 joint=robot.joint_names[i],
             )
-        out.append(v if np.any(v != 0.0) else None)
+        out.append(v if np.max(np.abs(v)) > REST_SPEED else None)
     return out[0], out[1]
+
+
+def check_at_limits(
+    robot: Robot,
+    q: NDArray[np.float64],
+    qd: NDArray[np.float64] | None,
+    word: str,
+    side: int = 0,
+) -> None:
+    """A velocity ``qd`` at the configuration ``q`` does not move a joint that sits on a
+    position limit through it: ``side`` −1 where the motion starts there (qd must not point
+    out), +1 where it ends there (qd must not arrive from beyond), 0 where it passes (a joint
+    on a limit must be still). ConfigurationError naming the joint."""
+    if qd is None:
+        return
+    lim = robot.limits
+    out = np.where(q >= lim.position_upper, qd, 0.0) - np.where(q <= lim.position_lower, qd, 0.0)
+    bad = out > 0.0 if side < 0 else out < 0.0 if side > 0 else out != 0.0
+    if np.any(bad):
+        i = int(np.flatnonzero(bad)[0])
+        what = {-1: "it would leave them", 1: "it would arrive from beyond them"}.get(
+            side, "a joint on a limit cannot pass through it (0 there)"
+        )
+        raise ConfigurationError(
+            f"{word} of joint {robot.joint_names[i]} is {qd[i]:.6g} rad/s at {q[i]:.6g} rad, on "
+            f"its position limits [{lim.position_lower[i]:.6g}, {lim.position_upper[i]:.6g}] "
+            f"rad: {what}",
+            joint=robot.joint_names[i],
+        )
+
+
+REST_SPEED = 1e-7
+"""[rad/s or m/s] A boundary velocity no larger in any joint is planned as rest, and recorded so
+(the plan's qd0 or qde is None). It is below what a joint encoder resolves, its direction —
+which a moving end's path must follow — means nothing, and stage 1 with b_0 or b_N below ~1e-15
+was measured to crawl (ur5: J 4.7 at 1e-8 rad/s and 9.2 at 3e-9 against 0.966 at rest and at
+3e-8, a hook at the end timed at a speed that small)."""

@@ -45,7 +45,7 @@ from ..timing import (
     time_with_jerk_limits,
 )
 from ..validate import is_number
-from .ends import check_velocities
+from .ends import check_at_limits, check_velocities
 from .paper import paper_iterations
 from .records import (
     MAX_CONTROL_POINTS,
@@ -330,6 +330,9 @@ def _check_ends(
     ends = check_velocities(setup.robot, qd0, qde, setup.velocity_limits)
     if ends[0] is None and ends[1] is None:
         return ends
+    if setup.position_limits:
+        check_at_limits(setup.robot, setup.q0, ends[0], "qd0", side=-1)
+        check_at_limits(setup.robot, setup.qe, ends[1], "qde", side=1)
     what = None
     if setup.method == Method.PAPER:
         what = "method 'paper' (the straight line's update keeps rest ends); use method='scp'"

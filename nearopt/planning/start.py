@@ -22,7 +22,7 @@ from ..errors import (
 from ..parallel import in_parallel
 from ..path import BSplinePath, Path, StraightPath
 from ..timing import optimal_timing
-from .ends import leaving_along
+from .ends import braking_distance, leaving_along
 from .records import MAX_CONTROL_POINTS, Method, Run, SCPOptions, Segment
 from .scp import knot_breaks, path_through, sequential_convex
 
@@ -227,10 +227,11 @@ def around_obstacles(
 
 def _leaving_line(setup: Segment) -> BSplinePath:
     """The straight line with the plan's boundary velocities
-    (:func:`~nearopt.planning.ends.leaving_along`): of the distances along qd0 (qde) of 1, 2, 4
-    and 8 times the line's own second control point, the one stage 1 times at the lowest J on
-    stage 2's grid; stage 1's InfeasiblePathError where it can time none (the arm cannot brake
-    or turn in time on any of them)."""
+    (:func:`~nearopt.planning.ends.leaving_along`): of the end legs of 1/16, 1/4, 1, 2, 4 and 8
+    times the line's own first leg (short ones for slow ends, whose direction hardly matters)
+    and of 1 and 2 times the braking distance at each moving end (fast ones: overshoot and
+    come back), the one stage 1 times at the lowest J on stage 2's grid; stage 1's
+    InfeasiblePathError where it can time none (the arm cannot brake or turn in time on any)."""
     robot, options = setup.robot, setup.options
     k = options.control_points
     moving = (setup.ends[0] is not None, setup.ends[1] is not None)
@@ -238,12 +239,24 @@ def _leaving_line(setup: Segment) -> BSplinePath:
     lower, upper = position_bounds(robot, setup.position_limits)
     if lower is None or upper is None:
         lower, upper = np.full(robot.n, -np.inf), np.full(robot.n, np.inf)
+    points = line.control_points
+    base = (np.linalg.norm(points[2] - points[0]), np.linalg.norm(points[-3] - points[-1]))
+    brake = (
+        braking_distance(robot, setup.q0, setup.ends[0], True),
+        braking_distance(robot, setup.qe, setup.ends[1], False),
+    )
+    legs = [(f * base[0], f * base[1]) for f in (1 / 16, 1 / 4, 1.0, 2.0, 4.0, 8.0)]
+    # braking legs where they are longer than the shortest above (a leg of a rounding error
+    # would leave the path's direction at the end to rounding)
+    if all(
+        v is None or (np.isfinite(d) and d > h / 16)
+        for d, h, v in zip(brake, base, setup.ends, strict=True)
+    ):
+        legs += [(f * brake[0], f * brake[1]) for f in (1.0, 2.0)]
     first_error: NearoptError | None = None
     best: tuple[float, BSplinePath] | None = None
-    for stretch in (1.0, 2.0, 4.0, 8.0):
-        path = leaving_along(
-            robot, line, setup.ends, (lower, upper), stretch, setup.velocity_limits
-        )
+    for leg in legs:
+        path = leaving_along(robot, line, setup.ends, (lower, upper), leg, setup.velocity_limits)
         try:
             timing = optimal_timing(
                 robot,

@@ -46,8 +46,9 @@ from ..inputs import read_toml
 from ..robot import Robot
 from ..robot.kinematics import ToolPose
 from ..trajectory import ChainedTrajectory
-from ..validate import is_number
+from ..validate import is_number, real_array
 from ..verify import Waypoint
+from .ends import check_at_limits
 from .planner import plan
 from .records import Iteration, PlanResult, PlanSettings, StopReason
 
@@ -651,6 +652,13 @@ def check_targets(
                         field="q",
                     )
             same = not isinstance(previous, ToolPose) and np.array_equal(previous, q)
+            if position_limits and target.velocity is not None:
+                try:
+                    check_at_limits(robot, q, real_array(target.velocity), "velocity")
+                except ConfigurationError as exc:
+                    raise TaskError(
+                        f"{prefix}target {name!r}: {exc}", target=name, field="velocity"
+                    ) from None
             target = Target(q, target.stop, name)
         if same:
             raise TaskError(
@@ -666,11 +674,8 @@ def _check_velocity(robot: Robot, target: Target, prefix: str, velocity_limits: 
     """A target's velocity: n finite joint velocities within the speed limits (when held);
     TaskError naming the target (and the joint)."""
     name = target.name
-    try:
-        v = np.asarray(target.velocity, dtype=float)
-    except (TypeError, ValueError):
-        v = np.full(0, np.nan)
-    if v.shape != (robot.n,) or not np.all(np.isfinite(v)):
+    v = real_array(target.velocity)
+    if v is None or v.shape != (robot.n,) or not np.all(np.isfinite(v)):
         raise TaskError(
             f"{prefix}target {name!r}: velocity must be {robot.n} finite joint velocities "
             f"[rad/s or m/s], got {target.velocity!r:.80}",
@@ -753,13 +758,17 @@ def _targets(targets: Sequence[Target | ArrayLike | ToolPose]) -> tuple[Target, 
 
 def _checked_window(target: Target, name: str) -> tuple[float, float]:
     """A target's window as (earliest, latest) [s]; ConfigurationError naming the target."""
-    try:
-        lo, hi = (float(x) for x in target.window)  # type: ignore[union-attr]
-    except (TypeError, ValueError):
+    window = target.window
+    if (
+        isinstance(window, str | bytes)
+        or not isinstance(window, Sequence | np.ndarray)
+        or len(window) != 2
+        or not all(is_number(x) for x in window)
+    ):
         raise ConfigurationError(
-            f"target {name!r}: window must be (earliest, latest) in seconds, got "
-            f"{target.window!r:.80}"
-        ) from None
+            f"target {name!r}: window must be (earliest, latest) in seconds, got {window!r:.80}"
+        )
+    lo, hi = float(window[0]), float(window[1])
     if not (math.isfinite(lo) and lo >= 0.0 and hi >= lo and hi > 0.0) or math.isnan(hi):
         raise ConfigurationError(
             f"target {name!r}: window ({lo:.6g}, {hi:.6g}) s is not a time window: 0 ≤ "

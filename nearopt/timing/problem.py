@@ -13,6 +13,7 @@ import numpy as np
 
 from ..errors import ConfigurationError, InfeasiblePathError
 from ..robot import PathCoefficients
+from ..validate import real_array
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -421,10 +422,10 @@ def with_moving_ends(
         if qd is None:
             ends.append(0.0)
             continue
-        qd = np.asarray(qd, dtype=float)
-        if qd.shape != (problem.dof,) or not np.all(np.isfinite(qd)):
+        given, qd = qd, real_array(qd)
+        if qd is None or qd.shape != (problem.dof,) or not np.all(np.isfinite(qd)):
             raise ConfigurationError(
-                f"{name} must be {problem.dof} finite joint velocities, got {qd.tolist()!r}"
+                f"{name} must be {problem.dof} finite joint velocities, got {given!r:.80}"
             )
         names = problem.joint_names
         over = np.abs(qd) - problem.velocity * (1.0 + 1e-12)  # (a limit × a ratio rounds)
