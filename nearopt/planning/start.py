@@ -227,11 +227,12 @@ def around_obstacles(
 
 def _leaving_line(setup: Segment) -> BSplinePath:
     """The straight line with the plan's boundary velocities
-    (:func:`~nearopt.planning.ends.leaving_along`): of the end legs of 1/16, 1/4, 1, 2, 4 and 8
-    times the line's own first leg (short ones for slow ends, whose direction hardly matters)
-    and of 1 and 2 times the braking distance at each moving end (fast ones: overshoot and
-    come back), the one stage 1 times at the lowest J on stage 2's grid; stage 1's
-    InfeasiblePathError where it can time none (the arm cannot brake or turn in time on any)."""
+    (:func:`~nearopt.planning.ends.leaving_along`): of the end legs of 1, 2, 4 and 8 times the
+    line's own first leg (and 1/16 and 1/4 of it where every moving end brakes within that: slow
+    ends, whose direction hardly matters) and of 1 and 2 times the braking distance at each
+    moving end (fast ones: overshoot and come back), the one stage 1 times at the lowest J on
+    stage 2's grid; stage 1's InfeasiblePathError where it can time none (the arm cannot brake
+    or turn in time on any)."""
     robot, options = setup.robot, setup.options
     k = options.control_points
     moving = (setup.ends[0] is not None, setup.ends[1] is not None)
@@ -245,7 +246,14 @@ def _leaving_line(setup: Segment) -> BSplinePath:
         braking_distance(robot, setup.q0, setup.ends[0], True),
         braking_distance(robot, setup.qe, setup.ends[1], False),
     )
-    legs = [(f * base[0], f * base[1]) for f in (1 / 16, 1 / 4, 1.0, 2.0, 4.0, 8.0)]
+    # short legs only where every moving end brakes within them (a fast end cannot take a
+    # short leg, and stage 1 spends long proving it: 1.8 s on the panda)
+    legs = [
+        (f * base[0], f * base[1])
+        for f in (1 / 16, 1 / 4, 1.0, 2.0, 4.0, 8.0)
+        if f >= 1.0
+        or all(v is None or d <= f * h for d, h, v in zip(brake, base, setup.ends, strict=True))
+    ]
     # braking legs where they are longer than the shortest above (a leg of a rounding error
     # would leave the path's direction at the end to rounding)
     if all(
