@@ -17,6 +17,7 @@ without moving ends; the trial is timed exactly as always.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
@@ -158,15 +159,15 @@ def leaving_along(
     path: BSplinePath,
     ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
     bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
-    legs: tuple[float, float],
+    legs: Sequence[tuple[float, float]],
     velocity_limits: bool = True,
-) -> BSplinePath:
+) -> list[BSplinePath]:
     """The straight line ``path`` (a B-spline θ0 → θe) with the boundary velocities ``ends``
-    (qd0, qde): it leaves θ0 along qd0 for a distance D — its first interior control point on that
-    ray at D/2, the second near D — then runs straight (control points at their Greville
-    abscissae) to θe, or to the point E before θe where it turns onto the ray against qde.
-    D and E are ``legs`` [rad], each no more than the position ``bounds`` (lower, upper) leave
-    room for (convex hull: the whole path stays within them).
+    (qd0, qde), once for each of ``legs``: it leaves θ0 along qd0 for a distance D — its first
+    interior control point on that ray at D/2, the second near D — then runs straight (control
+    points at their Greville abscissae) to θe, or to the point E before θe where it turns onto
+    the ray against qde. Each of ``legs`` is a (D, E) [rad], each no more than the position
+    ``bounds`` (lower, upper) leave room for (convex hull: the whole path stays within them).
 
     The second control point sets the path's curvature at the end (:func:`_turning`): the arm
     moving at qd0 needs torques H θ̈ + h + g + D θ̇ within its limits, and along a path θ̈ = θ'' b
@@ -174,6 +175,7 @@ def leaving_along(
     margin in their limits and slows no joint at its speed limit down too late (θ̈ along θ' is
     stage 1's choice): a moving arm that Coriolis forces would carry out of its torque limits on
     a straight leg turns the way they push it; one at a speed limit turns so that joint slows.
+    That θ̈ depends on the end's state and direction only: it is found once for all the legs.
     ``velocity_limits``: whether the speed limits are held.
 
     Raises
@@ -182,28 +184,44 @@ def leaving_along(
         Where a velocity points out of the position limits at its end (no path can leave or
         arrive that way), naming the joint.
     """
-    lower, upper = bounds
-    points = path.control_points.copy()
-    breaks = path.knots[4:-4] if points.shape[0] > 4 else None
-    count = points.shape[0]
-    s = BSplinePath.greville(count, breaks)
-    anchors = {0: points[0], count - 1: points[-1]}
+    count = path.control_points.shape[0]
+    moving = []  # (end, qd, its step inwards, the room along it, θ̈ there)
     for qd, end in zip(ends, (0, count - 1), strict=True):
         if qd is None:
             continue
+        at = path.control_points[end]
         step = qd / np.linalg.norm(qd) * (1.0 if end == 0 else -1.0)  # from the end inwards
-        room = _room(points[end], step, bounds, robot.joint_names, qd, end == 0)
+        room = _room(at, step, bounds, robot.joint_names, qd, end == 0)
+        qdd = _end_acceleration(robot, at, qd, qd, end == 0, velocity_limits)
+        moving.append((end, qd, step, room, qdd))
+    return [_with_legs(path, moving, leg, bounds) for leg in legs]
+
+
+def _with_legs(
+    path: BSplinePath,
+    moving: list[tuple],
+    legs: tuple[float, float],
+    bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
+) -> BSplinePath:
+    """One path of :func:`leaving_along`, with the end legs ``legs`` (D, E) [rad]."""
+    lower, upper = bounds
+    points = path.control_points.copy()
+    count = points.shape[0]
+    breaks = path.knots[4:-4] if count > 4 else None
+    s = BSplinePath.greville(count, breaks)
+    anchors = {0: points[0], count - 1: points[-1]}
+    for end, qd, step, room, qdd in moving:
         inner = 2 if end == 0 else count - 3
         reach = min(legs[0 if end == 0 else 1], room)
         points[inner] = points[end] + reach * step
         points[(1 if end == 0 else count - 2)] = points[end] + 0.5 * reach * step
-        turn = _turning(robot, BSplinePath(points, breaks), qd, end == 0, velocity_limits)
+        turn = _turning(BSplinePath(points, breaks), qd, end == 0, qdd)
         size = float(np.linalg.norm(turn))  # a bend sharper than the leg is long: the leg's
         if size > reach:  # (a slow end's curvature costs little; its θ̈ ⊥ θ' / b is noise)
             turn = turn * (reach / size)
         anchors[inner] = np.clip(points[inner] + turn, lower, upper)
-    first = 2 if ends[0] is not None else 0
-    last = count - 3 if ends[1] is not None else count - 1
+    first = 2 if any(m[0] == 0 for m in moving) else 0
+    last = count - 3 if any(m[0] == count - 1 for m in moving) else count - 1
     a, b = anchors[first], anchors[last]
     for j in range(first, last + 1):
         points[j] = a + (b - a) * (s[j] - s[first]) / (s[last] - s[first])
@@ -260,25 +278,20 @@ def _room(
 
 
 def _turning(
-    robot: Robot,
     path: BSplinePath,
     qd: NDArray[np.float64],
     start: bool,
-    velocity_limits: bool,
+    qdd: NDArray[np.float64] | None,
 ) -> NDArray[np.float64]:
     """The shift of the second control point from the end (along a straight end leg) that gives
-    the path at that end the curvature of :func:`leaving_along` [rad]: the least θ̈ ⊥ θ' of an
-    acceleration θ̈ (its part along θ' is stage 1's choice) whose torque H θ̈ + h + g + D θ̇ keeps
-    a margin of 25 % (else 10 %, else none) of each torque range, that keeps any acceleration
-    limit with the same margin, and that does not speed up (at the end: slow down towards the end)
-    a joint at 99 % or more of its speed limit. A small quadratic programme (Clarabel); without a
-    solution, the straight leg (no shift): stage 1 then says where it fails."""
-    s = 0.0 if start else path.s_end
-    q, tangent, curvature = (path(np.array([s]), k)[0] for k in (0, 1, 2))
-    b = float(qd @ tangent / (tangent @ tangent)) ** 2
-    qdd = _end_acceleration(robot, q, qd, tangent, start, velocity_limits)
+    the path at that end the curvature of :func:`leaving_along` [rad]: θ'' ⊥ θ' = θ̈ ⊥ θ' / b of
+    the acceleration ``qdd`` of :func:`_end_acceleration` (None: the straight leg, no shift;
+    stage 1 then says where it fails)."""
     if qdd is None:
         return np.zeros_like(qd)
+    s = 0.0 if start else path.s_end
+    tangent, curvature = (path(np.array([s]), k)[0] for k in (1, 2))
+    b = float(qd @ tangent / (tangent @ tangent)) ** 2
     unit = tangent / np.linalg.norm(tangent)
     across = (qdd - (qdd @ unit) * unit) / b  # θ'' ⊥ θ' [rad per unit of s²]
     # θ''(end) is affine in the second control point, with the same factor for every joint
@@ -296,7 +309,12 @@ def _end_acceleration(
     start: bool,
     velocity_limits: bool,
 ) -> NDArray[np.float64] | None:
-    """The acceleration θ̈ [rad/s²] of :func:`_turning` at the state (q, qd), or None."""
+    """The acceleration θ̈ [rad/s²] at the state (q, qd) of a path leaving (``start``) or
+    reaching q along ``tangent``: the least θ̈ ⊥ θ' whose torque H θ̈ + h + g + D θ̇ keeps a
+    margin of 25 % (else 10 %, else none) of each torque range, that keeps any acceleration
+    limit with the same margin, and that does not speed up (at the end: slow down towards the
+    end) a joint at 99 % or more of its speed limit. A small quadratic programme (Clarabel);
+    None without a solution."""
     import clarabel
 
     n = qd.size

@@ -263,8 +263,7 @@ def _leaving_line(setup: Segment) -> BSplinePath:
         legs += [(f * brake[0], f * brake[1]) for f in (1.0, 2.0)]
     first_error: NearoptError | None = None
     best: tuple[float, BSplinePath] | None = None
-    for leg in legs:
-        path = leaving_along(robot, line, setup.ends, (lower, upper), leg, setup.velocity_limits)
+    for path in leaving_along(robot, line, setup.ends, (lower, upper), legs, setup.velocity_limits):
         try:
             timing = optimal_timing(
                 robot,
