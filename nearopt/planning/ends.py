@@ -41,6 +41,7 @@ __all__ = [
     "check_at_limits",
     "braking_distance",
     "check_velocities",
+    "check_velocity",
     "end_terms",
     "leaving_along",
 ]
@@ -357,33 +358,36 @@ def _end_acceleration(
 def check_velocities(
     robot: Robot, qd0: object, qde: object, velocity_limits: bool
 ) -> tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]:
-    """(qd0, qde) of a plan's arguments as joint vectors, None where at rest (None, or no joint
-    faster than :data:`REST_SPEED`);
-    ConfigurationError naming the joint for a wrong shape, a value that is not finite or one
-    beyond the joint's speed limit (where those are enforced)."""
+    """(qd0, qde) of a plan's arguments as joint vectors (:func:`check_velocity`), None where at
+    rest (None, or no joint faster than :data:`REST_SPEED`)."""
     out: list[NDArray[np.float64] | None] = []
     for name, value in (("qd0", qd0), ("qde", qde)):
-        if value is None:
-            out.append(None)
-            continue
-        v = real_array(value)
-        v = np.full(0, np.nan) if v is None else v
-        if v.shape != (robot.n,) or not np.all(np.isfinite(v)):
-            raise ConfigurationError(
-                f"{name} must be {robot.n} finite joint velocities [rad/s or m/s], got "
-                f"{value!r:.80}"
-            )
-        limit = robot.limits.velocity
-        over = np.abs(v) - limit * (1.0 + 1e-12) if velocity_limits else np.zeros(robot.n)
-        if np.any(over > 0.0):
-            i = int(np.argmax(over))
-            raise ConfigurationError(
-                f"{name} of joint {robot.joint_names[i]} is {v[i]:.6g} rad/s: beyond its speed "
-                f"limit {limit[i]:.6g} rad/s",
-                joint=robot.joint_names[i],
-            )
-        out.append(v if np.max(np.abs(v)) > REST_SPEED else None)
+        v = None if value is None else check_velocity(robot, value, name, velocity_limits)
+        out.append(v if v is not None and np.max(np.abs(v)) > REST_SPEED else None)
     return out[0], out[1]
+
+
+def check_velocity(
+    robot: Robot, value: object, name: str, velocity_limits: bool
+) -> NDArray[np.float64]:
+    """A joint velocity [rad/s or m/s] as a vector of the robot's length; ConfigurationError
+    for a wrong shape, a value that is not a finite real number, or one beyond the joint's speed
+    limit (where those are enforced), naming ``name`` and the joint."""
+    v = real_array(value)
+    if v is None or v.shape != (robot.n,) or not np.all(np.isfinite(v)):
+        raise ConfigurationError(
+            f"{name} must be {robot.n} finite joint velocities [rad/s or m/s], got {value!r:.80}"
+        )
+    limit = robot.limits.velocity
+    over = np.abs(v) - limit * (1.0 + 1e-12) if velocity_limits else np.zeros(robot.n)
+    if np.any(over > 0.0):
+        i = int(np.argmax(over))
+        raise ConfigurationError(
+            f"{name} of joint {robot.joint_names[i]!r} is {v[i]:.6g} rad/s, beyond its speed "
+            f"limit {limit[i]:.6g} rad/s",
+            joint=robot.joint_names[i],
+        )
+    return v
 
 
 def check_at_limits(

@@ -48,7 +48,7 @@ from ..robot.kinematics import ToolPose
 from ..trajectory import ChainedTrajectory
 from ..validate import is_number, real_array
 from ..verify import Waypoint
-from .ends import check_at_limits
+from .ends import check_at_limits, check_velocity
 from .planner import plan
 from .records import Iteration, PlanResult, PlanSettings, StopReason
 
@@ -671,26 +671,14 @@ def check_targets(
 
 
 def _check_velocity(robot: Robot, target: Target, prefix: str, velocity_limits: bool) -> None:
-    """A target's velocity: n finite joint velocities within the speed limits (when held);
-    TaskError naming the target (and the joint)."""
-    name = target.name
-    v = real_array(target.velocity)
-    if v is None or v.shape != (robot.n,) or not np.all(np.isfinite(v)):
+    """A target's velocity (:func:`~nearopt.planning.ends.check_velocity`); TaskError naming
+    the target (and the joint)."""
+    try:
+        check_velocity(robot, target.velocity, "velocity", velocity_limits)
+    except ConfigurationError as exc:
         raise TaskError(
-            f"{prefix}target {name!r}: velocity must be {robot.n} finite joint velocities "
-            f"[rad/s or m/s], got {target.velocity!r:.80}",
-            target=name,
-            field="velocity",
-        )
-    over = np.abs(v) - robot.limits.velocity * (1.0 + 1e-12)
-    if velocity_limits and np.any(over > 0.0):
-        i = int(np.argmax(over))
-        raise TaskError(
-            f"{prefix}target {name!r}: velocity of joint {robot.joint_names[i]!r} is {v[i]:.6g} "
-            f"rad/s, beyond its speed limit {robot.limits.velocity[i]:.6g} rad/s",
-            target=name,
-            field="velocity",
-        )
+            f"{prefix}target {target.name!r}: {exc}", target=target.name, field="velocity"
+        ) from None
 
 
 _ORDER = (
