@@ -8,6 +8,7 @@ import sys
 import textwrap
 
 import numpy as np
+import pinocchio as pin
 import pytest
 from conftest import load
 
@@ -129,3 +130,41 @@ def test_a_two_hour_motion_verifies_in_bounded_memory() -> None:
     assert run.returncode == 0, run.stderr[-2000:]
     duration, samples, passed = run.stdout.split()
     assert float(duration) > 7200.0 and int(samples) > 7_200_000 and passed == "True"
+
+
+@pytest.mark.parametrize("name", ["two_link", "xarm7"])
+def test_the_simulated_end_state_agrees_with_scipys_dop853(name: str) -> None:
+    """verify's forward simulation (Dormand-Prince 5, Richardson's check) against SciPy's
+    DOP853 at rtol 1e-12 over the same last window, piece by piece between the knots where the
+    torque jumps, on an arm with more damping than the motion was planned for (so that u(t)
+    takes it far from θe): the end states within the accuracy verify asks of itself (1 % of its
+    tolerance, 1e-7). xarm7's strong joint damping is stiff."""
+    from scipy.integrate import solve_ivp
+
+    robot = load(name)
+    rng = np.random.default_rng(0)
+    if name == "two_link":
+        q0, qe = THETA_0, THETA_E
+    else:
+        lo, hi = robot.limits.position_lower, robot.limits.position_upper
+        q0, qe = rng.uniform(0.7 * lo + 0.3 * hi, 0.3 * lo + 0.7 * hi, (2, robot.n))
+    motion = nearopt.plan(robot, q0, qe, nearopt.TorqueCost(0.01), max_iterations=0).trajectory
+    robot, n = robot.with_limits(damping=robot.damping + 0.2), robot.n
+    report = verify(motion, robot, q0=q0, qe=qe, simulate=True)
+    simulated = next(c for c in report.checks if c.name == "simulated end position")
+    assert simulated.worst > 1e-4  # far from θe
+
+    def rate(t: float, x: np.ndarray) -> np.ndarray:
+        u = motion.torque(np.array([t]))[0] - robot.damping * x[n:]
+        return np.concatenate([x[n:], pin.aba(robot.model, data, x[:n], x[n:], u)])
+
+    data = robot.model.createData()
+    start = np.arange(0.0, motion.duration, 0.25)[-1]
+    cuts = np.concatenate([[start], motion.t[motion.t > start], [motion.duration]])
+    cuts = np.unique(cuts[cuts <= motion.duration])
+    q, qd, _ = motion.states(np.array([start]))
+    x = np.concatenate([q[0], qd[0]])
+    for a, b in zip(cuts[:-1], cuts[1:], strict=True):
+        inside = 1e-12 * max(1.0, b)
+        x = solve_ivp(rate, (a + inside, b - inside), x, "DOP853", rtol=1e-12, atol=1e-13).y[:, -1]
+    assert simulated.worst == pytest.approx(np.max(np.abs(x[:n] - qe)), abs=1e-7)
