@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import nearopt
-from nearopt.parallel import cores, in_child, in_parallel
+from nearopt.parallel import cores, in_child, in_children, in_parallel
 
 
 def test_forked_tasks_give_the_same_results_in_order() -> None:
@@ -55,3 +55,48 @@ def test_a_nearopt_error_in_a_child_comes_back_as_it_was() -> None:
         in_child(collides)
     assert caught.value.pair == ("link", "post") and caught.value.distance == -0.002
     assert in_child(os.getpid) != os.getpid()
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="without fork the tasks run here")
+def test_in_children_runs_every_task_in_a_process_of_its_own() -> None:
+    """Results in order, each from another process than this one and than the others; an
+    error in one child is raised here (the others ended)."""
+    answers = in_children([lambda k=k: (k, os.getpid()) for k in range(3)])
+    assert [k for k, _ in answers] == [0, 1, 2]
+    pids = {pid for _, pid in answers}
+    assert len(pids) == 3 and os.getpid() not in pids
+
+    def fails() -> None:
+        raise ValueError("no such thing")
+
+    with pytest.raises(nearopt.SolverError, match="the OMPL search failed: ValueError"):
+        in_children([os.getpid, fails, os.getpid], "the OMPL search")
+
+
+def test_ompl_attempts_in_children_give_the_same_paths_as_one_after_the_other() -> None:
+    """The cell's OMPL searches at the same time, each in its own child seeded with its own
+    number, give the paths the same searches give one after the other (each in a child of its
+    own): the same request gives the same paths however the processes share the cores."""
+    from nearopt.collision import Box, CollisionModel, Obstacle, Scene
+    from nearopt.collision.sampling import OMPL_SEED, collision_free_path, search_paths
+
+    robot = nearopt.Robot.from_name("ur5")
+    scene = Scene((Obstacle("box", Box((0.2, 0.2, 0.6)), (0.45, 0.0, 0.3)),), margin=0.01)
+    model = CollisionModel(robot, scene)
+    q0 = np.array([-0.8, -1.2, 1.2, -1.5, -1.57, 0.0])
+    qe = np.array([0.8, -1.2, 1.2, -1.5, -1.57, 0.0])
+    assert not model.path_clearance(nearopt.StraightPath(q0, qe)).certified
+    together = collision_free_path(
+        model, q0, qe, control_points=12, breaks=None, time_limit=20.0, attempts=3
+    )
+
+    def alone(seed: int) -> list[np.ndarray]:
+        found = search_paths(
+            model, q0, qe, control_points=12, breaks=None, time_limit=20.0, attempts=1, seed=seed
+        )
+        return [p.control_points for p in found]
+
+    one_by_one = [c for k in range(3) for c in in_child(lambda k=k: alone(OMPL_SEED + k))]
+    assert len(together) == len(one_by_one) >= 2
+    for path, points in zip(together, one_by_one, strict=True):
+        np.testing.assert_array_equal(path.control_points, points)

@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import CollisionError, ConfigurationError
-from ..parallel import in_child
+from ..parallel import in_children
 from ..path import BSplinePath, StraightPath
 
 if TYPE_CHECKING:
@@ -47,24 +47,33 @@ def collision_free_path(
     """Paths from θ0 to θe whose every pair keeps the margin, certified: one per OMPL search
     that succeeds (they may pass the obstacles on different sides).
 
-    The search runs in a forked child process whose OMPL generator is freshly seeded, so the
-    same request gives the same paths whatever ran before in this process (OMPL seeds once per
-    process); where ``os.fork`` is missing it runs here (reproducible for the first request).
-    Parameters and errors as :func:`search_paths`.
+    The ``attempts`` searches run at the same time, each in a forked child process whose OMPL
+    generator is seeded afresh (:data:`OMPL_SEED` plus the attempt's number), so the same
+    request gives the same paths whatever ran before in this process (OMPL seeds once per
+    process) and however the children share the cores; where ``os.fork`` is missing they run
+    here one after the other (reproducible for the first request). Each has the whole time
+    limit (a safety net: a search ends after a count of checks). Parameters and errors as
+    :func:`search_paths`.
     """
     arguments = dict(
-        control_points=control_points,
-        breaks=breaks,
-        time_limit=time_limit,
-        clearance=clearance,
-        attempts=attempts,
+        control_points=control_points, breaks=breaks, time_limit=time_limit, clearance=clearance
     )
     if _seeded:  # OMPL runs in this process already (seeded here): it searches here again
-        return search_paths(collisions, q0, qe, **arguments)  # type: ignore[arg-type]
-    found = in_child(
-        lambda: [p.control_points for p in search_paths(collisions, q0, qe, **arguments)],  # type: ignore[arg-type]
-        "the OMPL search",
+        return search_paths(collisions, q0, qe, attempts=attempts, **arguments)  # type: ignore[arg-type]
+
+    def attempt(seed: int) -> list[NDArray[np.float64]] | CollisionError:
+        try:
+            found = search_paths(collisions, q0, qe, attempts=1, seed=seed, **arguments)  # type: ignore[arg-type]
+        except CollisionError as exc:  # no path in this search: the others may find one
+            return exc
+        return [p.control_points for p in found]
+
+    answers = in_children(
+        [lambda i=i: attempt(OMPL_SEED + i) for i in range(attempts)], "the OMPL search"
     )
+    found = [c for a in answers if not isinstance(a, CollisionError) for c in a]
+    if not found:
+        raise next(a for a in answers if isinstance(a, CollisionError))
     return [BSplinePath(c, breaks if c.shape[0] == control_points + 2 else None) for c in found]
 
 
@@ -81,8 +90,9 @@ def search_paths(
     time_limit: float,
     clearance: float | None = None,
     attempts: int = 3,
+    seed: int = OMPL_SEED,
 ) -> list[BSplinePath]:
-    """:func:`collision_free_path` in this process.
+    """:func:`collision_free_path` in this process, one search after the other.
 
     Parameters
     ----------
@@ -103,6 +113,8 @@ def search_paths(
         The distance OMPL keeps [m] (default: margin + 2 cm).
     attempts
         Independent OMPL searches, sharing the time limit.
+    seed
+        OMPL's seed, where this process has not seeded it yet (OMPL seeds once per process).
 
     Raises
     ------
@@ -110,7 +122,7 @@ def search_paths(
         When no collision-free path is found within the time limit (or no B-spline of up to
         8 K control points follows OMPL's within the margin).
     """
-    ob, og = _ompl()
+    ob, og = _ompl(seed)
     margin = collisions.margin
     clearance = margin + 0.02 if clearance is None else clearance
     setup, checks = _ompl_setup(ob, og, collisions, q0, qe, clearance)
@@ -126,9 +138,9 @@ def search_paths(
     return found
 
 
-def _ompl() -> tuple[object, object]:
-    """OMPL's base and geometric modules, its log silenced and its generator seeded once per
-    process."""
+def _ompl(seed: int = OMPL_SEED) -> tuple[object, object]:
+    """OMPL's base and geometric modules, its log silenced and its generator seeded (with
+    ``seed``) once per process."""
     try:
         from ompl import base as ob
         from ompl import geometric as og
@@ -140,7 +152,7 @@ def _ompl() -> tuple[object, object]:
     global _seeded
     if not _seeded:
         ou.setLogLevel(ou.LOG_NONE)
-        ou.RNG.setSeed(OMPL_SEED)
+        ou.RNG.setSeed(seed)
         _seeded = True
     return ob, og
 
