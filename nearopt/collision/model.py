@@ -193,6 +193,12 @@ class CollisionModel:
                     field="name",
                 )
         self._joint = np.array([o.parentJoint for o in geom.geometryObjects], dtype=int)
+        self._moved_by = np.zeros((model.njoints, model.nv))
+        """1 where a velocity coordinate moves the joint's body (the joints that support it)."""
+        for j in range(1, model.njoints):
+            for k in model.supports[j].tolist()[1:]:
+                joint = model.joints[k]
+                self._moved_by[j, joint.idx_v : joint.idx_v + joint.nv] = 1.0
         srdf_path = robot.srdf if srdf is None else Path(srdf).expanduser().resolve()
         disabled = _srdf_disabled(srdf_path) if srdf_path is not None else set()
         pairs: list[tuple[int, int]] = []
@@ -294,30 +300,28 @@ class CollisionModel:
             Shapes (m,) and (m, n).
         """
         q = self.robot.check_configuration(q)
-        d = self._all(q)
-        index = np.arange(d.size) if pairs is None else np.asarray(pairs, dtype=int)
+        if pairs is None:
+            index = np.arange(len(self.pairs))
+            d = self._all(q)
+        else:  # those pairs only
+            index = np.asarray(pairs, dtype=int)
+            d = self._some(q, index)
         model, data = self.robot.model, self._data
         grads = np.zeros((index.size, model.nv))
         if index.size == 0:
-            return d[index], grads
-        pin.computeJointJacobians(model, data, q)
+            return d, grads
+        pin.computeJointJacobians(model, data, q)  # [v; ω] of every joint at the world origin
+        jv, jw = data.J[:3], data.J[3:]
         results = [self._results[int(k)] for k in index]
         normal = np.array([r.normal for r in results])  # (m, 3), from the first to the second
-        frame = pin.ReferenceFrame.LOCAL_WORLD_ALIGNED
         for side, sign in ((0, -1.0), (1, 1.0)):
-            joints = self._joint[self._pairs[index, side]]
             points = np.array(
                 [r.getNearestPoint1() if side == 0 else r.getNearestPoint2() for r in results]
             )
-            for j in np.unique(joints[joints != 0]):
-                rows = np.flatnonzero(joints == j)
-                jac = pin.getJointJacobian(model, data, int(j), frame)  # [v; ω] at o_j
-                arm = points[rows] - data.oMi[int(j)].translation
-                # nᵀ(v + ω × r) = nᵀv + (r × n)ᵀω
-                grads[rows] += sign * (
-                    normal[rows] @ jac[:3] + np.cross(arm, normal[rows]) @ jac[3:]
-                )
-        return d[index], grads
+            moved = self._moved_by[self._joint[self._pairs[index, side]]]  # (m, nv)
+            # a point p of the body: nᵀ(v + ω × p) = nᵀv + (p × n)ᵀω over the joints moving it
+            grads += sign * moved * (normal @ jv + np.cross(points, normal) @ jw)
+        return d, grads
 
     # ------------------------------------------------------------------ paths
     def path_clearance(
@@ -434,6 +438,16 @@ class CollisionModel:
         # the results' Python handles, taken once: they refer to the results coal fills at
         # every query (taking them anew from the vector costs as much as the query itself)
         self._results = list(self._gdata.distanceResults)
+
+    def _some(self, q: NDArray[np.float64], index: NDArray[np.int64]) -> NDArray[np.float64]:
+        """The distances of the pairs ``index`` only, at θ."""
+        t0 = time.perf_counter()
+        pin.updateGeometryPlacements(self.robot.model, self._data, self.geometry, self._gdata, q)
+        for k in index:
+            pin.computeDistance(self.geometry, self._gdata, int(k))
+        d = np.array([self._results[int(k)].min_distance for k in index])
+        self.seconds += time.perf_counter() - t0
+        return d
 
     def _all(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         if not self.geometry.collisionPairs:
