@@ -107,7 +107,37 @@ def test_distance_gradients_match_central_differences(name: str, rng: np.random.
         assert np.all((smooth | bracket)[separated]), (name, np.abs(grad - central).max())
         assert np.mean(smooth[separated]) > 0.9
         checked += int(separated.sum())
+        # some pairs only (coal pair by pair): the same distances and gradients
+        some = np.flatnonzero(separated)[::2]
+        d_some, grad_some = cm.distance_gradients(q, some)
+        np.testing.assert_allclose(d_some, d[some], rtol=0.0, atol=1e-8)
+        np.testing.assert_allclose(grad_some, grad[some], rtol=0.0, atol=tol)
     assert checked > 50
+
+
+def test_collision_rows_of_a_rejected_step_reuse_the_paths_clearances() -> None:
+    """Stage 2's clearance rows at the same path for a smaller step (a rejected step's model)
+    from the clearances and gradients computed for the larger one: the same rows as computed
+    afresh, a subset of the larger step's."""
+    from nearopt.path import BSplinePath
+    from nearopt.planning.scp import CollisionSamples, collision_rows
+
+    robot = load("ur5")
+    cm = CollisionModel(robot, CELL)
+    q0, qe = (np.array(q) for q in MOTIONS["ur5"])
+    bend = np.array([0.0, -0.4, 0.3, 0.0, 0.0, 0.0])
+    path = BSplinePath(
+        np.vstack([q0, *(q0 + (qe - q0) * x + np.sin(np.pi * x) * bend
+                         for x in np.linspace(0, 1, 10)[1:-1]), qe])
+    )  # fmt: skip
+    samples = CollisionSamples(cm, path)
+    large, small = np.full(robot.n, 0.3), np.full(robot.n, 0.05)
+    rows_large, lower_large = collision_rows(cm, path, large, samples=samples)
+    rows_small, lower_small = collision_rows(cm, path, small, samples=samples)
+    fresh_small, fresh_lower = collision_rows(cm, path, small)
+    assert 0 < rows_small.shape[0] < rows_large.shape[0]
+    np.testing.assert_allclose(rows_small.toarray(), fresh_small.toarray(), rtol=0, atol=2e-4)
+    np.testing.assert_allclose(lower_small, fresh_lower, rtol=0, atol=1e-8)
 
 
 @pytest.mark.parametrize("name", ["ur5", "panda"])

@@ -72,7 +72,13 @@ if TYPE_CHECKING:
     from ..robot import Robot
     from ..timing import TimingResult
 
-__all__ = ["sequential_convex", "collision_rows", "path_through", "knot_breaks"]
+__all__ = [
+    "sequential_convex",
+    "collision_rows",
+    "CollisionSamples",
+    "path_through",
+    "knot_breaks",
+]
 
 
 # why a run converged (formatted with the tolerance, or the smallest trust radius)
@@ -165,6 +171,7 @@ def sequential_convex(
     evaluations, index, small, failures = 1, 0, 0, 0
     run.report(0, timing, None, start)
     basis, moving = None, p.size // n  # moving: the interior control points (and θe, a pose)
+    parts = _IterateParts(timing, path_of(p))
     radius = np.full(moving, options.trust_radius)  # per control point (see _new_radius)
     reason, message = StopReason.ITERATION_LIMIT, f"{run.max_iterations} iterations"
     while index < run.max_iterations:
@@ -176,8 +183,9 @@ def sequential_convex(
         if basis is None:  # the grid (knots, interior points) is the same for every iterate
             basis = path_basis(timing.trajectory.path, disc, end=goal is not None)
         bound = np.repeat(radius, n) * scale
+        parts = parts if parts.timing is timing else _IterateParts(timing, path_of(p))
         model = _iterate_model(
-            robot, disc, z, basis, p, path_of(p), bound, collisions, start, via, goal,
+            robot, disc, z, basis, p, parts, bound, collisions, start, via, goal,
             duration, (kept, weights),
         )  # fmt: skip
         j0 = timing.objective
@@ -201,13 +209,11 @@ def sequential_convex(
         )  # fmt: skip
         evaluations += timed
         gain = -np.inf if trial is None else j0 - trial.objective
-        ratio = gain / (j0 - predicted)
         # the step's length per control point, as a fraction of scale
         reach = np.max((np.abs(dp) / scale).reshape(moving, n), axis=1)
-        radius = _new_radius(radius, gain, ratio, reach)
+        radius = _new_radius(radius, gain, gain / (j0 - predicted), reach)
         if gain > 0.0:
-            p, timing = p_trial, trial
-            index += 1
+            p, timing, index = p_trial, trial, index + 1
             run.report(index, timing, float(np.max(np.abs(dp))), timing.trajectory.path)
             small = small + 1 if gain < options.tolerance * abs(j0) else 0
             if small == 3:
@@ -362,13 +368,24 @@ def _on_plan_grid(
         )
 
 
+@dataclass
+class _IterateParts:
+    """What the convex model takes from the iterate alone, not from the trust region: built
+    once per iterate (a rejected step's smaller model takes it again)."""
+
+    timing: TimingResult
+    path: BSplinePath
+    jacobian: sp.csr_matrix | None = None
+    samples: CollisionSamples | None = None
+
+
 def _iterate_model(
     robot: Robot,
     disc: Discretisation,
     z: NDArray[np.float64],
     basis: PathBasis,
     p: NDArray[np.float64],
-    path: BSplinePath,
+    parts: _IterateParts,
     reach: NDArray[np.float64],
     collisions: CollisionModel | None,
     start: BSplinePath,
@@ -377,12 +394,15 @@ def _iterate_model(
     duration: tuple[float, bool] | None = None,
     ends: tuple[MovingEnds, NDArray[np.float64]] | None = None,
 ) -> _Model:
-    """The convex model at the iterate p (path ``path``, timing z): stage 1's rows linearised in
+    """The convex model at the iterate p (timing z; its path and what else depends on the
+    iterate alone in ``parts``): stage 1's rows linearised in
     the path, the clearances, the via-points kept (B(σ_v) Δp = 0 per joint), θe kept on the
     pose (J_task Δθe = 0) and the ends' directions kept with their b_0, b_N following the path
     (``ends``: the moving ends and the torque weights, :mod:`nearopt.planning.ends`)."""
     n = robot.n
-    jac = row_path_jacobian(robot, disc, z, basis, between=False)
+    if parts.jacobian is None:
+        parts.jacobian = row_path_jacobian(robot, disc, z, basis, between=False)
+    jac = parts.jacobian
     terms = None
     if ends is not None and ends[0].moving:
         terms = end_terms(disc, z, basis, *ends)
@@ -393,10 +413,16 @@ def _iterate_model(
         zero = np.zeros(rows.shape[0])
         model = replace(_with_rows(model, rows, zero, zero), price=terms.price)
     if collisions is not None:
+        if parts.samples is None:
+            parts.samples = CollisionSamples(collisions, parts.path, end=goal is not None)
         model = _with_rows(  # a joint's largest step bound over the control points
             model,
             *collision_rows(
-                collisions, path, reach.reshape(-1, n).max(axis=0), end=goal is not None
+                collisions,
+                parts.path,
+                reach.reshape(-1, n).max(axis=0),
+                end=goal is not None,
+                samples=parts.samples,
             ),
         )
     if via:  # every iterate goes through the via-points: B(σ_v) Δp = 0 per joint
@@ -486,12 +512,42 @@ def knot_breaks(
     return 0.5 * (1.0 - np.cos(np.pi * x))
 
 
+class CollisionSamples:
+    """The clearances along one path at ``checks`` uniform σ, and their gradients where
+    :func:`collision_rows` asks for them, computed once: a rejected step's smaller model takes
+    them again (its path is the same)."""
+
+    def __init__(
+        self, collisions: CollisionModel, path: BSplinePath, checks: int = 129, end: bool = False
+    ) -> None:
+        self.collisions, self.path = collisions, path
+        sigma = np.linspace(0.0, 1.0, checks)
+        self.q = path(sigma)
+        self.basis = path.basis(sigma)[:, 1 : None if end else -1]  # (S, K), or K + 1
+        self.dist = np.array([collisions.distances(x) for x in self.q])  # (S, P)
+        self._gradients: dict[int, tuple[NDArray[np.int64], NDArray, NDArray]] = {}
+
+    def gradients(
+        self, m: int, pairs: NDArray[np.int64]
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
+        """d and ∂d/∂θ of ``pairs`` at the m-th check (from the last call there when it asked
+        for these pairs or more)."""
+        known = self._gradients.get(m)
+        if known is None or not np.all(np.isin(pairs, known[0])):
+            d, grad = self.collisions.distance_gradients(self.q[m], pairs)
+            self._gradients[m] = (pairs, d, grad)
+            return d, grad
+        where = np.searchsorted(known[0], pairs)
+        return known[1][where], known[2][where]
+
+
 def collision_rows(
     collisions: CollisionModel,
     path: BSplinePath,
     reach: NDArray[np.float64],
     checks: int = 129,
     end: bool = False,
+    samples: CollisionSamples | None = None,
 ) -> tuple[sp.csr_matrix, NDArray[np.float64]]:
     """The clearances at ``checks`` uniform σ, linearised in the interior control points:
 
@@ -501,6 +557,7 @@ def collision_rows(
     them (at the margin itself) has room; the current path (Δc = 0) always satisfies them. Only
     pairs within :data:`ACTIVATION` of m⁺ whose distance the step (|Δθ_i| ≤ ``reach_i``) could
     bring to m⁺ are kept, at their local minima along σ and the checks beside them.
+    ``samples``: the path's clearances computed before (:class:`CollisionSamples`).
 
     Returns
     -------
@@ -509,10 +566,9 @@ def collision_rows(
         (rows, (K + 1)·n) with the end point when ``end``.
     """
     inner = collisions.margin + max(0.25 * collisions.margin, 1e-3)
-    sigma = np.linspace(0.0, 1.0, checks)
-    q = path(sigma)
-    basis = path.basis(sigma)[:, 1 : None if end else -1]  # (S, K), or K + 1 with the end
-    dist = np.array([collisions.distances(x) for x in q])  # (S, P)
+    if samples is None:
+        samples = CollisionSamples(collisions, path, checks, end)
+    q, basis, dist = samples.q, samples.basis, samples.dist
     # how far the step can move each pair, at most ACTIVATION: farther pairs wait for the next
     # iterate (a step that brings one into contact fails the certificate and is rejected)
     moved = np.minimum(collisions.motion_rates @ reach, ACTIVATION)
@@ -527,7 +583,7 @@ def collision_rows(
     keep[:, :] &= np.any(basis != 0.0, axis=1)[:, None]
     blocks, lower = [], []
     for m in np.flatnonzero(keep.any(axis=1)):
-        d, grad = collisions.distance_gradients(q[m], np.flatnonzero(keep[m]))
+        d, grad = samples.gradients(int(m), np.flatnonzero(keep[m]))
         blocks.append(np.kron(basis[m][None, :], grad))  # row: Σ_j B_j(σ) ∇dᵀ Δc_j
         lower.append(np.minimum(inner - d, 0.0))
     if not blocks:
