@@ -198,3 +198,23 @@ def test_the_replanning_demo_runs_and_its_motion_is_continuous(tmp_path) -> None
     change = np.abs(np.diff(qd[near], axis=0))
     assert np.all(change <= 1.5 * np.max(np.abs(qdd[near]), axis=0) * np.max(np.diff(t[near])))
     assert "meshcat" in (tmp_path / "replanning.html").read_text().lower()
+
+
+@pytest.mark.parametrize("seed", [1, 2])
+def test_replanning_a_nearly_stopped_arm_costs_what_replanning_it_at_rest_does(seed: int) -> None:
+    """A ur5 re-planned to a new goal a few microseconds before its motion ends (|θ̇| ~ 1e-5
+    rad/s along the old direction): J within 0.2 % of the plan from rest at the same θ, and the
+    motion leaves with that θ̇ (stage 2 from the line leaving along it stopped up to 23 % above)."""
+    robot = load("ur5")
+    rng = np.random.default_rng(seed)
+    lo = np.maximum(robot.limits.position_lower, -np.pi)
+    hi = np.minimum(robot.limits.position_upper, np.pi)
+    q0, q1, q2 = rng.uniform(0.7 * lo + 0.3 * hi, 0.3 * lo + 0.7 * hi, (3, robot.n))
+    first = nearopt.plan(robot, q0, q1, COST).trajectory
+    q, qd, _ = first.states(np.array([(1.0 - 1e-7) * first.duration]))
+    assert 1e-7 < np.linalg.norm(qd[0]) < 1e-3
+    moving = nearopt.plan(robot, q[0], q2, COST, qd0=qd[0])
+    rest = nearopt.plan(robot, q[0], q2, COST)
+    assert moving.J <= rest.J * (1 + 2e-3), (moving.J, rest.J)
+    assert nearopt.verify_plan(moving).passed
+    np.testing.assert_allclose(moving.trajectory.states(np.zeros(1))[1][0], qd[0], atol=1e-12)

@@ -44,6 +44,7 @@ __all__ = [
     "check_velocity",
     "end_terms",
     "leaving_along",
+    "turned_onto",
 ]
 
 
@@ -227,6 +228,20 @@ def _with_legs(
     for j in range(first, last + 1):
         points[j] = a + (b - a) * (s[j] - s[first]) / (s[last] - s[first])
     return BSplinePath(points, breaks)
+
+
+def turned_onto(
+    path: BSplinePath, ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]
+) -> BSplinePath:
+    """``path`` with its first (last) interior control point turned onto the ray along qd0
+    (against qde) from its end, at the same distance: a path from rest that leaves θ0 along
+    qd0 (arrives along qde), for a nearly resting end whose direction hardly matters."""
+    points = path.control_points.copy()
+    for qd, end, inner, sign in ((ends[0], 0, 1, 1.0), (ends[1], -1, -2, -1.0)):
+        if qd is not None:
+            leg = np.linalg.norm(points[inner] - points[end])
+            points[inner] = points[end] + sign * leg * qd / np.linalg.norm(qd)
+    return BSplinePath(points, path.knots[4:-4] if points.shape[0] > 4 else None)
 
 
 def braking_distance(

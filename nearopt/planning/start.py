@@ -39,6 +39,7 @@ __all__ = [
     "around_obstacles",
     "position_bounds",
     "check_inside",
+    "resting_ends",
     "SCREENING",
 ]
 
@@ -235,17 +236,19 @@ def _leaving_line(setup: Segment) -> BSplinePath:
     or turn in time on any)."""
     robot, options = setup.robot, setup.options
     k = options.control_points
-    moving = (setup.ends[0] is not None, setup.ends[1] is not None)
+    brake = (
+        braking_distance(robot, setup.q0, setup.ends[0], True),
+        braking_distance(robot, setup.qe, setup.ends[1], False),
+    )
+    # knots clustered at a rest end and at a nearly resting one: the path may turn right after
+    # it, as from rest
+    moving = tuple(not r for r in resting_ends(setup))
     line = BSplinePath.line(setup.q0, setup.qe, k, knot_breaks(options, k, moving))
     lower, upper = position_bounds(robot, setup.position_limits)
     if lower is None or upper is None:
         lower, upper = np.full(robot.n, -np.inf), np.full(robot.n, np.inf)
     points = line.control_points
     base = (np.linalg.norm(points[2] - points[0]), np.linalg.norm(points[-3] - points[-1]))
-    brake = (
-        braking_distance(robot, setup.q0, setup.ends[0], True),
-        braking_distance(robot, setup.qe, setup.ends[1], False),
-    )
     # short legs only where every moving end brakes within them (a fast end cannot take a
     # short leg, and stage 1 spends long proving it: 1.8 s on the panda)
     legs = [
@@ -285,6 +288,20 @@ def _leaving_line(setup: Segment) -> BSplinePath:
             f"arriving along qde) cannot be timed: {first_error}"
         )
     return best[1]
+
+
+def resting_ends(setup: Segment) -> tuple[bool, bool]:
+    """Whether each end is at rest or nearly (its velocity brakes within 1/16 of the first
+    leg of the straight line whose knots cluster at rest ends: a direction that hardly
+    matters)."""
+    options, k = setup.options, setup.options.control_points
+    points = BSplinePath.line(setup.q0, setup.qe, k, knot_breaks(options, k)).control_points
+    leg = (np.linalg.norm(points[2] - points[0]), np.linalg.norm(points[-3] - points[-1]))
+    brake = (
+        braking_distance(setup.robot, setup.q0, setup.ends[0], True),
+        braking_distance(setup.robot, setup.qe, setup.ends[1], False),
+    )
+    return (brake[0] <= leg[0] / 16, brake[1] <= leg[1] / 16)
 
 
 def position_bounds(
