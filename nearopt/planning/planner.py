@@ -305,7 +305,7 @@ def _from_rest_plan(
             return first
         initial = _time_first_path(setup, path, path)
         second = _improve(setup, path, path, via_s, initial, callback, verbose)
-    except (InfeasiblePathError, SolverError):
+    except (InfeasiblePathError, SolverError, ConfigurationError):  # no second plan
         return first
     spent = first[3] + plan_rest[3] + second[3]
     if second[0].J < first[0].J:

@@ -47,7 +47,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from ..cost import TorqueCost
-from ..errors import InfeasiblePathError, SolverError, UnreachablePoseError
+from ..errors import ConfigurationError, InfeasiblePathError, SolverError, UnreachablePoseError
 from ..path import BSplinePath
 from ..robot.kinematics import ToolPose, inverse_kinematics, task_jacobian
 from ..timing import (
@@ -475,7 +475,9 @@ def _try_step(
         return p_trial, None, 0
     try:
         return p_trial, time_it(p_trial), 1
-    except (InfeasiblePathError, SolverError):
+    except (InfeasiblePathError, SolverError, ConfigurationError):
+        # (ConfigurationError: a moving end's direction lost to rounding, the end's control
+        # point within ~1e-8 of θ0 or θe: a step to reject like any other)
         return p_trial, None, 0
 
 

@@ -240,9 +240,7 @@ def _leaving_line(setup: Segment) -> BSplinePath:
         braking_distance(robot, setup.q0, setup.ends[0], True),
         braking_distance(robot, setup.qe, setup.ends[1], False),
     )
-    # knots clustered at a rest end and at a nearly resting one: the path may turn right after
-    # it, as from rest
-    moving = tuple(not r for r in resting_ends(setup))
+    moving = (setup.ends[0] is not None, setup.ends[1] is not None)
     line = BSplinePath.line(setup.q0, setup.qe, k, knot_breaks(options, k, moving))
     lower, upper = position_bounds(robot, setup.position_limits)
     if lower is None or upper is None:
