@@ -66,9 +66,11 @@ def in_children(
     child's error) ends the other children."""
     if not hasattr(os, "fork"):
         return [task() for task in tasks]
-    children = [_fork(task) for task in tasks]
+    children: list[tuple[int, int]] = []
     results = []
     try:
+        for task in tasks:
+            children.append(_fork(task))
         while children:
             results.append(_collect(*children.pop(0), what))
     except BaseException:

@@ -201,7 +201,7 @@ def verify(
         Expected start and goal [rad]; default: the motion's own ends (then only rest is checked).
     cost, J
         If both are given, J is recomputed as ∫ f0 dt by composite 4-point Gauss-Legendre
-        quadrature with RNEA's torques (pieces no longer than 4/rate, at least 10 on every
+        quadrature with RNEA's torques (pieces no longer than 4/rate, at least 2 on every
         interval between the times where the motion's acceleration jumps, the trajectory's knot
         times: across a jump any rule is first-order) and compared with ``J`` (relative
         ``cost_tolerance``).
@@ -710,7 +710,8 @@ def _cost_check(
     tol: Tolerances,
 ) -> Check:
     """J recomputed by composite 4-point Gauss-Legendre quadrature (exact for polynomials of
-    degree 7) on pieces no longer than 4/rate [s] (at least 10 per interval between the knots,
+    degree 7) on pieces no longer than 4/rate [s] (at least :data:`MIN_PIECES` per interval
+    between the knots,
     where the motion's acceleration jumps), the torques by RNEA, :data:`CHUNK` nodes at a time."""
     total = 0.0
     for nodes, weights in _gauss_nodes(trajectory.t, rate):

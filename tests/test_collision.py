@@ -138,6 +138,13 @@ def test_collision_rows_of_a_rejected_step_reuse_the_paths_clearances() -> None:
     assert 0 < rows_small.shape[0] < rows_large.shape[0]
     np.testing.assert_allclose(rows_small.toarray(), fresh_small.toarray(), rtol=0, atol=2e-4)
     np.testing.assert_allclose(lower_small, fresh_lower, rtol=0, atol=1e-8)
+    # pairs asked for in any order, then some of them: each its own values
+    asked = CollisionSamples(cm, path)
+    d_all, grad_all = cm.distance_gradients(asked.q[64])
+    d, grad = asked.gradients(64, np.array([5, 2, 9]))
+    again = asked.gradients(64, np.array([2]))
+    np.testing.assert_allclose(d, d_all[[5, 2, 9]], rtol=0, atol=1e-8)
+    np.testing.assert_allclose(again[1], grad_all[[2]], rtol=0, atol=2e-4)
 
 
 @pytest.mark.parametrize("name", ["ur5", "panda"])

@@ -218,3 +218,19 @@ def test_replanning_a_nearly_stopped_arm_costs_what_replanning_it_at_rest_does(s
     assert moving.J <= rest.J * (1 + 2e-3), (moving.J, rest.J)
     assert nearopt.verify_plan(moving).passed
     np.testing.assert_allclose(moving.trajectory.states(np.zeros(1))[1][0], qd[0], atol=1e-12)
+
+
+def test_a_nearly_resting_start_toward_a_position_limit_stays_within_it() -> None:
+    """A panda start 0.03 rad below joint 4's upper limit, θ̇ = 1e-4 rad/s toward it: the
+    plan from rest turned onto that direction keeps its first leg within the room left (it
+    went 0.13 rad beyond the limit), and the plan verifies."""
+    robot = load("panda")
+    upper = robot.limits.position_upper
+    q0 = np.array([0.0, -0.3, 0.0, upper[3] - 0.03, 0.0, 1.5, 0.8])
+    qe = np.array([1.2, 0.4, -0.5, -2.2, 0.3, 2.0, 0.0])
+    qd0 = np.zeros(7)
+    qd0[3] = 1e-4
+    result = nearopt.plan(robot, q0, qe, nearopt.TorqueCost(0.01), qd0=qd0)
+    q = result.trajectory.sample(1000.0).q
+    assert np.all(q <= upper + 1e-9) and np.all(q >= robot.limits.position_lower - 1e-9)
+    assert nearopt.verify_plan(result).passed

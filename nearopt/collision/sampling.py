@@ -72,8 +72,15 @@ def collision_free_path(
         [lambda i=i: attempt(OMPL_SEED + i) for i in range(attempts)], "the OMPL search"
     )
     found = [c for a in answers if not isinstance(a, CollisionError) for c in a]
+    errors = [a for a in answers if isinstance(a, CollisionError)]
     if not found:
-        raise next(a for a in answers if isinstance(a, CollisionError))
+        raise (
+            errors[0]
+            if errors
+            else CollisionError(
+                f"no collision-free path from the start to the goal: {attempts} OMPL searches"
+            )
+        )
     return [BSplinePath(c, breaks if c.shape[0] == control_points + 2 else None) for c in found]
 
 

@@ -231,16 +231,24 @@ def _with_legs(
 
 
 def turned_onto(
-    path: BSplinePath, ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None]
+    robot: Robot,
+    path: BSplinePath,
+    ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
+    bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
 ) -> BSplinePath:
     """``path`` with its first (last) interior control point turned onto the ray along qd0
-    (against qde) from its end, at the same distance: a path from rest that leaves θ0 along
-    qd0 (arrives along qde), for a nearly resting end whose direction hardly matters."""
+    (against qde) from its end, at the same distance but no farther than the position
+    ``bounds`` leave room for (the convex hull keeps the path within them): a path from rest
+    that leaves θ0 along qd0 (arrives along qde), for a nearly resting end whose direction
+    hardly matters. ConfigurationError where a velocity points out of the bounds at its end."""
     points = path.control_points.copy()
     for qd, end, inner, sign in ((ends[0], 0, 1, 1.0), (ends[1], -1, -2, -1.0)):
-        if qd is not None:
-            leg = np.linalg.norm(points[inner] - points[end])
-            points[inner] = points[end] + sign * leg * qd / np.linalg.norm(qd)
+        if qd is None or not np.any(qd):
+            continue
+        step = sign * qd / np.linalg.norm(qd)  # from the end inwards
+        room = _room(points[end], step, bounds, robot.joint_names, qd, end == 0)
+        leg = min(float(np.linalg.norm(points[inner] - points[end])), room)
+        points[inner] = points[end] + leg * step
     return BSplinePath(points, path.knots[4:-4] if points.shape[0] > 4 else None)
 
 

@@ -60,7 +60,7 @@ from .records import (
     StopReason,
 )
 from .scp import sequential_convex
-from .start import first_path, resting_ends
+from .start import first_path, position_bounds, resting_ends
 
 if TYPE_CHECKING:
     from numpy.typing import ArrayLike, NDArray
@@ -236,13 +236,11 @@ def plan(
         line, start = _fast_enough(setup, line, start, via_s)
     initial = _time_first_path(setup, line, start)
     outcome = _improve(setup, line, start, via_s, initial, callback, verbose)
-    if setup.duration is not None and setup.max_iterations > 0 and setup.method == Method.SCP:
+    again = setup.max_iterations > 0 and outcome[1] is not StopReason.INTERRUPTED
+    if again and setup.duration is not None and setup.method == Method.SCP:
         outcome = _from_free_plan(setup, line, start, via_s, outcome, callback, verbose)
-    if (
-        any(v is not None for v in setup.ends)
-        and setup.max_iterations > 0
-        and all(resting_ends(setup))
-    ):
+    again = again and outcome[1] is not StopReason.INTERRUPTED
+    if again and any(v is not None for v in setup.ends) and all(resting_ends(setup)):
         outcome = _from_rest_plan(setup, via_s, outcome, callback, verbose)
     timing, reason, message, evaluations, history = outcome
     return _result(setup, timing, initial, history, reason, message, evaluations, via_s)
@@ -272,8 +270,8 @@ def _from_free_plan(
             return first
         initial = _time_first_path(setup, path, path)
         second = _improve(setup, path, path, via_s, initial, callback, verbose)
-    except (InfeasiblePathError, SolverError):
-        return first
+    except (InfeasiblePathError, SolverError, KeyboardInterrupt):
+        return first  # (a Ctrl-C ends planning with the first plan)
     spent = first[3] + plan_free[3] + second[3]
     if second[0].J < first[0].J:
         return (*second[:2], second[2] + "; from the plan without the duration", spent, second[4])
@@ -300,13 +298,16 @@ def _from_rest_plan(
         line, start, _ = first_path(rest)
         initial = _time_first_path(rest, line, start)
         plan_rest = _improve(rest, line, start, via_s, initial, None, False)
-        path = turned_onto(plan_rest[0].trajectory.path, setup.ends)
+        lower, upper = position_bounds(setup.robot, setup.position_limits)
+        if lower is None or upper is None:
+            lower, upper = np.full(setup.robot.n, -np.inf), np.full(setup.robot.n, np.inf)
+        path = turned_onto(setup.robot, plan_rest[0].trajectory.path, setup.ends, (lower, upper))
         if time.perf_counter() >= setup.deadline:
             return first
         initial = _time_first_path(setup, path, path)
         second = _improve(setup, path, path, via_s, initial, callback, verbose)
-    except (InfeasiblePathError, SolverError, ConfigurationError):  # no second plan
-        return first
+    except (InfeasiblePathError, SolverError, ConfigurationError, KeyboardInterrupt):
+        return first  # no second plan (a Ctrl-C ends planning with the first)
     spent = first[3] + plan_rest[3] + second[3]
     if second[0].J < first[0].J:
         return (*second[:2], second[2] + "; from the plan from rest", spent, second[4])

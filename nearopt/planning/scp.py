@@ -475,9 +475,13 @@ def _try_step(
         return p_trial, None, 0
     try:
         return p_trial, time_it(p_trial), 1
-    except (InfeasiblePathError, SolverError, ConfigurationError):
-        # (ConfigurationError: a moving end's direction lost to rounding, the end's control
-        # point within ~1e-8 of θ0 or θe: a step to reject like any other)
+    except (InfeasiblePathError, SolverError):
+        return p_trial, None, 0
+    except ConfigurationError:
+        if not ends.moving:
+            raise
+        # a moving end's direction lost to rounding (the end's control point within ~1e-8 of
+        # θ0 or θe): a step to reject like any other
         return p_trial, None, 0
 
 
@@ -536,9 +540,9 @@ class CollisionSamples:
         for these pairs or more)."""
         known = self._gradients.get(m)
         if known is None or not np.all(np.isin(pairs, known[0])):
-            d, grad = self.collisions.distance_gradients(self.q[m], pairs)
-            self._gradients[m] = (pairs, d, grad)
-            return d, grad
+            order = np.unique(pairs)  # kept sorted, to be looked up
+            d, grad = self.collisions.distance_gradients(self.q[m], order)
+            known = self._gradients[m] = (order, d, grad)
         where = np.searchsorted(known[0], pairs)
         return known[1][where], known[2][where]
 
@@ -559,7 +563,8 @@ def collision_rows(
     them (at the margin itself) has room; the current path (Δc = 0) always satisfies them. Only
     pairs within :data:`ACTIVATION` of m⁺ whose distance the step (|Δθ_i| ≤ ``reach_i``) could
     bring to m⁺ are kept, at their local minima along σ and the checks beside them.
-    ``samples``: the path's clearances computed before (:class:`CollisionSamples`).
+    ``samples``: the path's clearances computed before (:class:`CollisionSamples`; at their
+    checks and with their end point, not ``checks`` and ``end``).
 
     Returns
     -------
