@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ..errors import CollisionError, ConfigurationError
-from ..parallel import in_children
+from ..parallel import cores, in_children
 from ..path import BSplinePath, StraightPath
 
 if TYPE_CHECKING:
@@ -52,14 +52,20 @@ def collision_free_path(
     request gives the same paths whatever ran before in this process (OMPL seeds once per
     process) and however the children share the cores; where ``os.fork`` is missing they run
     here one after the other (reproducible for the first request). Each has the whole time
-    limit (a safety net: a search ends after a count of checks). Parameters and errors as
-    :func:`search_paths`.
+    limit times the searches per core (a safety net: a search ends after a count of checks,
+    and sharing a core slows it down). Parameters and errors as :func:`search_paths`.
     """
-    arguments = dict(
-        control_points=control_points, breaks=breaks, time_limit=time_limit, clearance=clearance
-    )
     if _seeded:  # OMPL runs in this process already (seeded here): it searches here again
-        return search_paths(collisions, q0, qe, attempts=attempts, **arguments)  # type: ignore[arg-type]
+        return search_paths(
+            collisions, q0, qe, control_points=control_points, breaks=breaks,
+            time_limit=time_limit, clearance=clearance, attempts=attempts,
+        )  # fmt: skip
+    arguments = dict(
+        control_points=control_points,
+        breaks=breaks,
+        time_limit=time_limit * max(1.0, attempts / cores()),
+        clearance=clearance,
+    )
 
     def attempt(seed: int) -> list[NDArray[np.float64]] | CollisionError:
         try:
