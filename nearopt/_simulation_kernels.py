@@ -6,7 +6,25 @@ States and slopes are (2n, lanes): θ over θ̇, and θ̇ over θ̈. Compiled on
 
 from __future__ import annotations
 
-from .timing._kernels import cached_jit
+from .timing._kernels import cached_jit, inline_jit
+
+
+@inline_jit(error_model="numpy")
+def _store(slopes, k, acceleration):  # pragma: no cover - compiled
+    """ABA's answer ``acceleration`` (n, lanes) into the θ̈ half of ``slopes[k]``."""
+    n, lanes = acceleration.shape
+    for r in range(n):
+        for lane in range(lanes):
+            slopes[k, n + r, lane] = acceleration[r, lane]
+
+
+@inline_jit(error_model="numpy")
+def _combined(slopes, weights, count, r, lane):  # pragma: no cover - compiled
+    """Σ_{j < count} weights[j] slopes[j, r, lane]."""
+    total = 0.0
+    for j in range(count):
+        total += weights[j] * slopes[j, r, lane]
+    return total
 
 
 @cached_jit(error_model="numpy")
@@ -18,15 +36,10 @@ def stage(state, slopes, coefficients, i, h, u, damping, acceleration, at, tau):
     m, lanes = state.shape
     n = m // 2
     if i > 0:
-        for r in range(n):
-            for lane in range(lanes):
-                slopes[i - 1, n + r, lane] = acceleration[r, lane]
+        _store(slopes, i - 1, acceleration)
     for r in range(m):
         for lane in range(lanes):
-            total = 0.0
-            for j in range(i):
-                total += coefficients[i, j] * slopes[j, r, lane]
-            at[r, lane] = state[r, lane] + h[lane] * total
+            at[r, lane] = state[r, lane] + h[lane] * _combined(slopes, coefficients[i], i, r, lane)
     for r in range(n):
         for lane in range(lanes):
             slopes[i, r, lane] = at[n + r, lane]
@@ -39,14 +52,8 @@ def advance(state, slopes, weights, h, acceleration):  # pragma: no cover - comp
     """The last stage's ``acceleration`` into the slopes, then the step:
     ``state += h Σ_i b_i slopes[i]``."""
     stages, m, lanes = slopes.shape
-    n = m // 2
-    for r in range(n):
-        for lane in range(lanes):
-            slopes[stages - 1, n + r, lane] = acceleration[r, lane]
+    _store(slopes, stages - 1, acceleration)
     for r in range(m):
         for lane in range(lanes):
-            total = 0.0
-            for i in range(stages):
-                total += weights[i] * slopes[i, r, lane]
-            state[r, lane] += h[lane] * total
+            state[r, lane] += h[lane] * _combined(slopes, weights, stages, r, lane)
     return 0
