@@ -236,10 +236,6 @@ def _leaving_line(setup: Segment) -> BSplinePath:
     or turn in time on any)."""
     robot, options = setup.robot, setup.options
     k = options.control_points
-    brake = (
-        braking_distance(robot, setup.q0, setup.ends[0], True),
-        braking_distance(robot, setup.qe, setup.ends[1], False),
-    )
     moving = (setup.ends[0] is not None, setup.ends[1] is not None)
     line = BSplinePath.line(setup.q0, setup.qe, k, knot_breaks(options, k, moving))
     lower, upper = position_bounds(robot, setup.position_limits)
@@ -247,6 +243,10 @@ def _leaving_line(setup: Segment) -> BSplinePath:
         lower, upper = np.full(robot.n, -np.inf), np.full(robot.n, np.inf)
     points = line.control_points
     base = (np.linalg.norm(points[2] - points[0]), np.linalg.norm(points[-3] - points[-1]))
+    brake = (
+        braking_distance(robot, setup.q0, setup.ends[0], True),
+        braking_distance(robot, setup.qe, setup.ends[1], False),
+    )
     # short legs only where every moving end brakes within them (a fast end cannot take a
     # short leg, and stage 1 spends long proving it: 1.8 s on the panda)
     legs = [
