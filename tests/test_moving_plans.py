@@ -234,3 +234,30 @@ def test_a_nearly_resting_start_toward_a_position_limit_stays_within_it() -> Non
     q = result.trajectory.sample(1000.0).q
     assert np.all(q <= upper + 1e-9) and np.all(q >= robot.limits.position_lower - 1e-9)
     assert nearopt.verify_plan(result).passed
+
+
+def test_nearly_resting_ends_under_a_duration() -> None:
+    """Both ends of a ur5 motion nearly at rest (states 1e-7 of a motion's duration before its
+    end) under t_e ≤ 0.9 of the plan from rest's t_e: within 6 % of the plan from rest under
+    the same limit (the plan from rest's path, its legs turned fully onto the velocities, was
+    too slow for it, and the first path's plan came back 57 % above), t_e within the limit."""
+    robot = load("ur5")
+    rng = np.random.default_rng(0)
+    lo = np.maximum(robot.limits.position_lower, -3.0)
+    hi = np.minimum(robot.limits.position_upper, 3.0)
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    q0, q1, q2 = (mid + 0.4 * half * rng.uniform(-1, 1, robot.n) for _ in range(3))
+
+    def near_end(a: np.ndarray, b: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        motion = nearopt.plan(robot, a, b, COST).trajectory
+        q, qd, _ = motion.states(np.array([(1.0 - 1e-7) * motion.duration]))
+        return q[0], qd[0]
+
+    q, qd0 = near_end(q0, q1)
+    qde = near_end(q2, q0)[1]
+    limit = 0.9 * nearopt.plan(robot, q, q0, COST).duration
+    rest = nearopt.plan(robot, q, q0, COST, max_duration=limit)
+    moving = nearopt.plan(robot, q, q0, COST, qd0=qd0, qde=qde, max_duration=limit)
+    assert moving.duration <= limit * (1 + 1e-9)
+    assert moving.J <= 1.06 * rest.J, (moving.J, rest.J)
+    assert nearopt.verify_plan(moving).passed

@@ -235,19 +235,24 @@ def turned_onto(
     path: BSplinePath,
     ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None],
     bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
+    share: float = 1.0,
 ) -> BSplinePath:
-    """``path`` with its first (last) interior control point turned onto the ray along qd0
-    (against qde) from its end, at the same distance but no farther than the position
-    ``bounds`` leave room for (the convex hull keeps the path within them): a path from rest
-    that leaves θ0 along qd0 (arrives along qde), for a nearly resting end whose direction
-    hardly matters. ConfigurationError where a velocity points out of the bounds at its end."""
+    """``path`` with its first (last) interior control point moved onto the ray along qd0
+    (against qde) from its end, ``share`` of its distance from the end out or 16 braking
+    distances (the longer, but no farther than it was, nor than the position ``bounds`` leave
+    room for: the convex hull keeps the path within them): a path from rest that leaves θ0
+    along qd0 (arrives along qde), for a nearly resting end whose direction hardly matters; a
+    small share changes the path least. ConfigurationError where a velocity points out of the
+    bounds at its end."""
     points = path.control_points.copy()
     for qd, end, inner, sign in ((ends[0], 0, 1, 1.0), (ends[1], -1, -2, -1.0)):
         if qd is None or not np.any(qd):
             continue
         step = sign * qd / np.linalg.norm(qd)  # from the end inwards
         room = _room(points[end], step, bounds, robot.joint_names, qd, end == 0)
-        leg = min(float(np.linalg.norm(points[inner] - points[end])), room)
+        leg = float(np.linalg.norm(points[inner] - points[end]))
+        brake = braking_distance(robot, points[end], qd, end == 0)
+        leg = min(leg, max(16.0 * brake, share * leg), room)
         points[inner] = points[end] + leg * step
     return BSplinePath(points, path.knots[4:-4] if points.shape[0] > 4 else None)
 

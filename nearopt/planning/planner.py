@@ -231,6 +231,16 @@ def plan(
         setup = replace(setup, duration=_check_duration(setup, duration, max_duration))
     if qd0 is not None or qde is not None:
         setup = replace(setup, ends=_check_ends(setup, qd0, qde))
+    initial, outcome, via_s = _planned(setup, callback, verbose)
+    timing, reason, message, evaluations, history = outcome
+    return _result(setup, timing, initial, history, reason, message, evaluations, via_s)
+
+
+def _planned(
+    setup: Segment, callback: Callable[[Iteration], None] | None, verbose: bool
+) -> tuple[TimingResult, tuple[TimingResult, StopReason, str, int, list[Iteration]], tuple]:
+    """The checked request planned: the first path timed, stage 2's outcome (the better of the
+    runs it takes) and the via-points' σ."""
     line, start, via_s = first_path(setup)
     if setup.duration is not None:
         line, start = _fast_enough(setup, line, start, via_s)
@@ -242,8 +252,7 @@ def plan(
     again = again and outcome[1] is not StopReason.INTERRUPTED
     if again and any(v is not None for v in setup.ends) and all(resting_ends(setup)):
         outcome = _from_rest_plan(setup, via_s, outcome, callback, verbose)
-    timing, reason, message, evaluations, history = outcome
-    return _result(setup, timing, initial, history, reason, message, evaluations, via_s)
+    return initial, outcome, via_s
 
 
 def _from_free_plan(
@@ -294,17 +303,20 @@ def _from_rest_plan(
     if time.perf_counter() >= setup.deadline:
         return first
     rest = replace(setup, ends=(None, None))
-    try:
-        line, start, _ = first_path(rest)
-        initial = _time_first_path(rest, line, start)
-        plan_rest = _improve(rest, line, start, via_s, initial, None, False)
+    try:  # (the whole plan from rest: under a duration too)
+        plan_rest = _planned(rest, None, False)[1]
         lower, upper = position_bounds(setup.robot, setup.position_limits)
         if lower is None or upper is None:
             lower, upper = np.full(setup.robot.n, -np.inf), np.full(setup.robot.n, np.inf)
-        path = turned_onto(setup.robot, plan_rest[0].trajectory.path, setup.ends, (lower, upper))
-        if time.perf_counter() >= setup.deadline:
-            return first
-        initial = _time_first_path(setup, path, path)
+        found = plan_rest[0].trajectory.path
+        for share in (1.0, 1e-3):  # its first leg turned, else hardly any of it (a duration)
+            path = turned_onto(setup.robot, found, setup.ends, (lower, upper), share)
+            try:
+                initial = _time_first_path(setup, path, path)
+                break
+            except InfeasiblePathError:
+                if share < 1.0 or time.perf_counter() >= setup.deadline:
+                    raise
         second = _improve(setup, path, path, via_s, initial, callback, verbose)
     except (InfeasiblePathError, SolverError, ConfigurationError, KeyboardInterrupt):
         return first  # no second plan (a Ctrl-C ends planning with the first)
