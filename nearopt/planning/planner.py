@@ -301,7 +301,8 @@ def _from_rest_plan(
     iterations up to 23 % above the plan from rest (ur5 re-planned at the end of a motion): its
     model's end terms b_0 ∝ |qd0|² / |θ'(0)|² hardly see a turn right after the start."""
     if time.perf_counter() >= setup.deadline:
-        return first
+        note = "; no time left to plan again from the plan from rest"
+        return (*first[:2], first[2] + note, *first[3:])
     rest = replace(setup, ends=(None, None))
     try:  # (the whole plan from rest: under a duration too)
         plan_rest = _planned(rest, None, False)[1]
