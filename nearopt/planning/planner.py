@@ -525,8 +525,14 @@ def _setup(
     )
 
 
+FIRST_TIMING = 10.0
+"""Stage 1 of the first path gets at least this much time [s], whatever is left of the plan's
+time limit: without it there is no plan to return."""
+
+
 def _time_first_path(setup: Segment, line: Path, start: Path | None) -> TimingResult:
-    """Stage 1 on the first path, on the plan's grid (under the plan's duration, if any)."""
+    """Stage 1 on the first path, on the plan's grid (under the plan's duration, if any), with
+    what is left of the time limit, at least :data:`FIRST_TIMING`."""
     robot, cost, grid = setup.robot, setup.cost, setup.grid
     velocity_limits, deadline = setup.velocity_limits, setup.deadline
     t, exact = setup.duration or (None, False)
@@ -537,7 +543,9 @@ def _time_first_path(setup: Segment, line: Path, start: Path | None) -> TimingRe
             cost,
             grid=grid,
             velocity_limits=velocity_limits,
-            time_limit=deadline - time.perf_counter(),
+            # the first path is timed however little time is left (a plan is at least its
+            # timing: a cell plan's collision-free search spent its limit, leaving one < 0)
+            time_limit=max(deadline - time.perf_counter(), FIRST_TIMING),
             duration=t if exact else None,
             max_duration=None if exact else t,
             qd0=setup.ends[0],
