@@ -453,8 +453,10 @@ def with_moving_ends(
             i = int(np.argmax(np.abs(qd - lam * tangent)))
             raise ConfigurationError(
                 f"{name} must point along the path at its {word}, and the path {along}: "
-                f"joint {names[i]} would move at {qd[i]:.6g} rad/s where the path's direction "
-                f"gives {lam * tangent[i] + 0.0:.6g} rad/s (θ̇ = θ'(s)·ṡ)"
+                f"joint {names[i]} would move at {qd[i]:.9g} rad/s where the path's direction "
+                f"gives {lam * tangent[i] + 0.0:.9g} rad/s (θ̇ = θ'(s)·ṡ; off by "
+                f"{float(np.max(across)) / size:.2g} of the largest |{name}|, tolerance "
+                f"{tolerance:g})"
             )
         ends.append(lam * lam)
     return replace(problem, b_ends=(ends[0], ends[1]))
