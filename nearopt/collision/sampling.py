@@ -74,18 +74,20 @@ def collision_free_path(
             return exc
         return [p.control_points for p in found]
 
+    began = time.perf_counter()
     answers = in_children(
         [lambda i=i: attempt(OMPL_SEED + i) for i in range(attempts)], "the OMPL search"
     )
     found = [c for a in answers if not isinstance(a, CollisionError) for c in a]
     errors = [a for a in answers if isinstance(a, CollisionError)]
-    if not found:
-        raise (
-            errors[0]
-            if errors
-            else CollisionError(
-                f"no collision-free path from the start to the goal: {attempts} OMPL searches"
-            )
+    if errors and errors[0].pair is not None:  # the start or the goal collides
+        raise errors[0]
+    if not found:  # (each search's message quotes its own scaled time limit)
+        raise CollisionError(
+            f"no collision-free path from the start to the goal found in "
+            f"{time.perf_counter() - began:.3g} s by {attempts} OMPL searches at once "
+            f"(RRT-Connect, each ending after {SEARCH_CHECKS} checks or its share of the time "
+            "limit; the straight line collides)"
         )
     return [BSplinePath(c, breaks if c.shape[0] == control_points + 2 else None) for c in found]
 
