@@ -811,16 +811,27 @@ def _check_waypoints(
     stops = [k for k, w in enumerate(waypoints) if w.stop]
     if stops:
         speed = np.maximum(np.abs(qd_at[stops]), np.abs(qd_before[stops]))
-        k, i = np.unravel_index(np.argmax(speed), speed.shape)
-        checks.append(
-            Check(
-                "rest at stops",
-                float(speed[k, i]),
-                tolerance,
-                "rad/s",
-                f"waypoint {stops[k] + 1} at t = {t[stops[k]]:.6g} s, joint {names[i]!r}",
-            )
-        )
+        checks.append(_worst_joint("rest at stops", speed, stops, t, names, tolerance))
+
+
+def _worst_joint(
+    name: str,
+    values: NDArray[np.float64],
+    which: list[int],
+    t: NDArray[np.float64],
+    names: list[str],
+    tolerance: float,
+) -> Check:
+    """The check of the largest of ``values`` [rad/s], shape (len(which), n): one row per
+    waypoint ``which[k]`` (at ``t[which[k]]``), one column per joint."""
+    k, i = np.unravel_index(np.argmax(values), values.shape)
+    return Check(
+        name,
+        float(values[k, i]),
+        tolerance,
+        "rad/s",
+        f"waypoint {which[k] + 1} at t = {t[which[k]]:.6g} s, joint {names[i]!r}",
+    )
 
 
 def _check_passing(
@@ -837,17 +848,8 @@ def _check_passing(
     if moving:
         wanted = np.stack([_velocity(robot, waypoints[k].qd, "a waypoint's qd") for k in moving])
         gap = np.maximum(*(np.abs(v[moving] - wanted) for v in speeds))
-        k, i = np.unravel_index(np.argmax(gap), gap.shape)
-        checks.append(
-            Check(
-                "velocities at targets",
-                float(gap[k, i]),
-                tolerance,
-                "rad/s",
-                f"waypoint {moving[k] + 1} at t = {t[moving[k]]:.6g} s, "
-                f"joint {robot.joint_names[i]!r}",
-            )
-        )
+        names = list(robot.joint_names)
+        checks.append(_worst_joint("velocities at targets", gap, moving, t, names, tolerance))
     timed = [k for k, w in enumerate(waypoints) if w.window is not None]
     if timed:
         late = [

@@ -281,9 +281,19 @@ def _from_free_plan(
         second = _improve(setup, path, path, via_s, initial, callback, verbose)
     except (InfeasiblePathError, SolverError, KeyboardInterrupt):
         return first  # (a Ctrl-C ends planning with the first plan)
-    spent = first[3] + plan_free[3] + second[3]
+    return _lower(first, second, first[3] + plan_free[3] + second[3], "without the duration")
+
+
+def _lower(
+    first: tuple[TimingResult, StopReason, str, int, list[Iteration]],
+    second: tuple[TimingResult, StopReason, str, int, list[Iteration]],
+    spent: int,
+    plan: str,
+) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+    """The run of lower J, with the stage-1 solves ``spent`` by all; the second's message says
+    it started from "the plan ``plan``"."""
     if second[0].J < first[0].J:
-        return (*second[:2], second[2] + "; from the plan without the duration", spent, second[4])
+        return (*second[:2], f"{second[2]}; from the plan {plan}", spent, second[4])
     return (*first[:3], spent, first[4])
 
 
@@ -321,10 +331,7 @@ def _from_rest_plan(
         second = _improve(setup, path, path, via_s, initial, callback, verbose)
     except (InfeasiblePathError, SolverError, ConfigurationError, KeyboardInterrupt):
         return first  # no second plan (a Ctrl-C ends planning with the first)
-    spent = first[3] + plan_rest[3] + second[3]
-    if second[0].J < first[0].J:
-        return (*second[:2], second[2] + "; from the plan from rest", spent, second[4])
-    return (*first[:3], spent, first[4])
+    return _lower(first, second, first[3] + plan_rest[3] + second[3], "from rest")
 
 
 def _fast_enough(
