@@ -100,9 +100,9 @@ class PlanRequest:
         The arm: a known name, or a URDF file (exactly one).
     lock, tip, base, srdf, group, lock_at
         Which joints of a URDF are planned for (``lock_at``: ``"JOINT=VALUE"`` strings [rad or m]).
-    effort_limit, velocity_limit, acceleration_limit, jerk_limit
+    effort_limit, velocity_limit, acceleration_limit, jerk_limit, torque_rate_limit
         Limits overriding the URDF's: one value or one per joint [N·m or N; rad/s; rad/s²;
-        rad/s³].
+        rad/s³; N·m/s or N/s].
     velocity_scale
         A factor on every joint speed limit.
     joint_limits
@@ -148,6 +148,7 @@ class PlanRequest:
     velocity_scale: float | None = None
     acceleration_limit: tuple[float, ...] | None = None
     jerk_limit: tuple[float, ...] | None = None
+    torque_rate_limit: tuple[float, ...] | None = None
     joint_limits: str | None = None
     q0: tuple[float, ...] | None = None
     qe: tuple[float, ...] | None = None
@@ -396,6 +397,7 @@ _KINDS: dict[str, _Kind] = {
     "velocity_scale": _Kind.NUMBER,
     "acceleration_limit": _Kind.NUMBERS,
     "jerk_limit": _Kind.NUMBERS,
+    "torque_rate_limit": _Kind.NUMBERS,
     "joint_limits": _Kind.TEXT,
     "q0": _Kind.NUMBERS,
     "qe": _Kind.NUMBERS,
@@ -804,6 +806,7 @@ PER_JOINT = (
     "velocity_limit",
     "acceleration_limit",
     "jerk_limit",
+    "torque_rate_limit",
 )
 """The request's fields that hold one value per joint (and ``via``, several such vectors)."""
 
@@ -891,6 +894,7 @@ def _with_limits(robot: Robot, request: PlanRequest) -> Robot:
         ("velocity_limit", "velocity"),
         ("acceleration_limit", "acceleration"),
         ("jerk_limit", "jerk"),
+        ("torque_rate_limit", "torque_rate"),
     ):
         values = getattr(request, option)
         if values is not None:

@@ -310,6 +310,14 @@ def _planner_options(p: argparse.ArgumentParser) -> None:
         "qdd = 0 at rest",
     )
     p.add_argument(
+        "--torque-rate-limit",
+        nargs="+",
+        type=float,
+        metavar="R",
+        help="actuator torque-rate limits |du/dt| <= R [N·m/s], one value or one per joint "
+        "(default: none): the path found is timed under them, C¹ with qdd = 0 at rest",
+    )
+    p.add_argument(
         "--joint-limits",
         metavar="FILE",
         help="MoveIt's joint_limits.yaml: its declared speed, acceleration, jerk, effort and "
@@ -559,7 +567,7 @@ def _print_summary(result: PlanResult | TaskResult, out: TextIO) -> None:
         else:
             first = "first path"
         if result.jerk_timing is not None:  # its J is stage 1's, without them
-            first += " without the jerk limits"
+            first += " without the jerk or torque-rate limits"
         print(
             f"{result.status}: J = {result.J:.6f} ({first} {result.initial.J:.6f}), "
             f"te = {result.duration:.4f} s, {len(result.history) - 1} iterations, "

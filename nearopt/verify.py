@@ -61,6 +61,10 @@ class Waypoint:
 CHUNK = 65536
 """Samples (and quadrature nodes) checked at a time: a check's memory does not grow with the
 motion's duration."""
+RATE_STEP = 1e-6
+"""The step [s] of the central differences that give the torque rate u̇ where the robot has
+torque-rate limits (rounding ~1e-16·|u|/1e-6, truncation ~1e-12·|u⃛|: both far below 1e-6 of a
+limit)."""
 MAX_STEP = 1e-2
 """The forward simulation's longest Runge-Kutta step [s] (halved where it is not accurate)."""
 STABLE = 3.0
@@ -471,6 +475,7 @@ class _Sampled:
     qdd: NDArray[np.float64]
     u: NDArray[np.float64]
     qddd: NDArray[np.float64] | None = None  # where the robot has jerk limits and the motion a jerk
+    udot: NDArray[np.float64] | None = None  # where the robot has torque-rate limits
 
     @classmethod
     def at(
@@ -480,7 +485,34 @@ class _Sampled:
         jerk = None
         if np.any(np.isfinite(robot.limits.jerk)) and hasattr(trajectory, "jerk"):
             jerk = trajectory.jerk(t)
-        return cls(t, q, qd, qdd, _torques(robot, pool, q, qd, qdd), jerk)
+        u = _torques(robot, pool, q, qd, qdd)
+        rate = None
+        if np.any(np.isfinite(robot.limits.torque_rate)):
+            rate = _torque_rates(trajectory, robot, pool, t, u)
+        return cls(t, q, qd, qdd, u, jerk, rate)
+
+
+def _torque_rates(
+    trajectory: Motion,
+    robot: Robot,
+    pool: pin.ModelPool,
+    t: NDArray[np.float64],
+    u: NDArray[np.float64],
+) -> NDArray[np.float64]:
+    """u̇ at the times t, from the motion's states alone: central differences of the torques
+    over ±:data:`RATE_STEP` (one-sided at 0 and t_e; where u̇ jumps, at a knot of a C¹ timing,
+    one across lies between the two sides), or the mean rate over the step to the next sample
+    where that is larger (|u̇| ≤ r for all t bounds it too; it catches a jump of u between the
+    samples, which a stage-1 timing makes at every knot)."""
+    ahead = np.minimum(t + RATE_STEP, trajectory.duration)
+    behind = np.maximum(t - RATE_STEP, 0.0)
+    u1, u0 = (_torques(robot, pool, *trajectory.states(x)) for x in (ahead, behind))
+    rate = (u1 - u0) / np.maximum(ahead - behind, 1e-300)[:, None]
+    if t.size > 1:
+        mean = np.diff(u, axis=0) / np.maximum(np.diff(t), 1e-300)[:, None]
+        larger = np.abs(mean) > np.abs(rate[:-1])
+        rate[:-1] = np.where(larger, mean, rate[:-1])
+    return rate
 
 
 def _torques(
@@ -603,6 +635,18 @@ def _limit_checks(
                 lim.jerk,
                 lim.jerk,
                 tol.limit,
+                "relative",
+            )
+        )
+    if np.any(np.isfinite(lim.torque_rate)):
+        rows.append(
+            (
+                "torque-rate limits (RNEA, central differences)",
+                motion.udot,
+                -lim.torque_rate,
+                lim.torque_rate,
+                lim.torque_rate,
+                tol.torque,
                 "relative",
             )
         )

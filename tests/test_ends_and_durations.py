@@ -239,9 +239,9 @@ def test_durations_through_the_command_line_and_their_refusals(tmp_path) -> None
     custom = nearopt.CallableCost(lambda q, qd, u: 1.0 + np.sum(u**2, axis=1))
     with pytest.raises(nearopt.ConfigurationError, match="a duration is kept for"):
         nearopt.plan(robot, q0, qe, custom, duration=1.0)
-    jerky = robot.with_limits(jerk=1000.0)
-    with pytest.raises(nearopt.ConfigurationError, match="jerk limits"):
-        nearopt.plan(jerky, q0, qe, duration=1.0)
+    for limits in ({"jerk": 1000.0}, {"torque_rate": 1000.0}):
+        with pytest.raises(nearopt.ConfigurationError, match="jerk or torque-rate limits"):
+            nearopt.plan(robot.with_limits(**limits), q0, qe, duration=1.0)
 
 
 def _reference_within(problem, cost: nearopt.TorqueCost, duration: float):

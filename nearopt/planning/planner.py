@@ -179,7 +179,7 @@ def plan(
         interior control points on those rays, :mod:`nearopt.planning.ends`), and stage 1 times
         it with b_0 = (qd0·θ'/|θ'|²)²; the first path is the straight line with those ends (its
         end legs turned along them). Within the speed limits; ``"scp"`` only; not yet with
-        via-points, obstacles or jerk limits.
+        via-points, obstacles or jerk or torque-rate limits.
 
     Returns
     -------
@@ -363,7 +363,7 @@ def _fast_enough(
 
 def _check_duration(setup: Segment, duration: object, max_duration: object) -> tuple[float, bool]:
     """(T, exact) of :func:`plan`'s duration arguments; ConfigurationError for both, a bad
-    value, a cost outside 1 + Σ w u², jerk limits."""
+    value, a cost outside 1 + Σ w u², jerk or torque-rate limits."""
     exact = check_duration("duration", duration)
     most = check_duration("max_duration", max_duration)
     if exact is not None and most is not None:
@@ -373,9 +373,9 @@ def _check_duration(setup: Segment, duration: object, max_duration: object) -> t
             "a duration is kept for f0 = 1 + Σ w u² (TimeCost, TorqueCost), not "
             f"{setup.cost.describe()}"
         )
-    if np.any(np.isfinite(setup.robot.limits.jerk)):
+    if setup.robot.limits.smooth:
         raise ConfigurationError(
-            "a duration with jerk limits is not planned yet: give one or the other"
+            "a duration with jerk or torque-rate limits is not planned yet: give one or the other"
         )
     if setup.method == Method.PAPER:
         raise ConfigurationError("a duration needs method 'scp' (the paper's update has none)")
@@ -396,8 +396,8 @@ def _check_ends(
     what = None
     if setup.method == Method.PAPER:
         what = "method 'paper' (the straight line's update keeps rest ends); use method='scp'"
-    elif np.any(np.isfinite(setup.robot.limits.jerk)):
-        what = "jerk limits (they start and end at rest)"
+    elif setup.robot.limits.smooth:
+        what = "jerk or torque-rate limits (they start and end at rest)"
     elif setup.collisions is not None:
         what = "obstacles or self-collision checks"
     elif setup.vias:
@@ -660,7 +660,7 @@ def _result(
     robot, collisions, goal, vias = setup.robot, setup.collisions, setup.goal, setup.vias
     method, t_start = setup.method, setup.t_start
     jerk = None
-    if np.any(np.isfinite(robot.limits.jerk)):
+    if robot.limits.smooth:
         timing, jerk, message = _under_jerk_limits(setup, timing, initial, message)
     return PlanResult(
         robot=robot,
@@ -692,6 +692,10 @@ def _under_jerk_limits(
     message. Within what is left of the plan's time limit (past it, each jerk-limited timing
     stops at its first feasible iterate: the message says so)."""
     late: list[str] = []
+    lim = setup.robot.limits
+    pairs = (("jerk", lim.jerk), ("torque-rate", lim.torque_rate))
+    kinds = [kind for kind, values in pairs if np.any(np.isfinite(values))]
+    limits = f"{' and '.join(kinds)} limits"
 
     def timed(path: Path) -> JerkTimingResult:
         result = time_with_jerk_limits(
@@ -703,7 +707,7 @@ def _under_jerk_limits(
             time_limit=max(setup.deadline - time.perf_counter(), 0.0),
         )
         if result.timing.timed_out:
-            late.append("; the jerk-limited timing stopped at the plan's time limit")
+            late.append(f"; the timing under the {limits} stopped at the plan's time limit")
         return result
 
     found = timed(timing.trajectory.path)
@@ -714,11 +718,11 @@ def _under_jerk_limits(
             return (
                 initial,
                 first,
-                f"{message}; under the jerk limits the first path costs less (J "
+                f"{message}; under the {limits} the first path costs less (J "
                 f"{first.J:.6g} against {found.J:.6g} for the path found without them): it is "
                 f"returned, timed under them (te {first.duration:.4g} s){''.join(late[:1])}",
             )
-    return timing, found, f"{message}; timed under the jerk limits: {note}{''.join(late[:1])}"
+    return timing, found, f"{message}; timed under the {limits}: {note}{''.join(late[:1])}"
 
 
 def _via_points(
@@ -840,9 +844,10 @@ def _certify(collisions: CollisionModel, path: Path) -> Clearance:
 
 def _check_jerk_cost(robot: Robot, cost: Cost) -> None:
     """The jerk-limited timing minimises time or 1 + Σ w u² only."""
-    if np.any(np.isfinite(robot.limits.jerk)) and not isinstance(cost, TimeCost | TorqueCost):
+    if robot.limits.smooth and not isinstance(cost, TimeCost | TorqueCost):
         raise ConfigurationError(
-            "with jerk limits the cost must be TimeCost or TorqueCost (1 + Σ w u²), got "
+            "with jerk or torque-rate limits the cost must be TimeCost or TorqueCost "
+            "(1 + Σ w u²), got "
             f"{type(cost).__name__}"
         )
 

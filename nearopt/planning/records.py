@@ -271,9 +271,10 @@ class PlanResult:
     via_s
         The path parameters where the path passes them.
     jerk_timing
-        Where the robot has jerk limits: the returned path timed under them (C¹, θ̈ = 0 at
-        rest; :func:`~nearopt.timing.time_with_jerk_limits`). It is the motion, J and t_e of
-        the plan; ``timing`` is then stage 1's timing of the same path without them.
+        Where the robot has jerk or torque-rate limits: the returned path timed under them
+        (C¹, θ̈ = 0 at rest; :func:`~nearopt.timing.time_with_jerk_limits`). It is the
+        motion, J and t_e of the plan; ``timing`` is then stage 1's timing of the same path
+        without them.
     duration_asked
         The duration asked for [s] and whether exactly (t_e = T) or at most (t_e ≤ T); None.
     qd0, qde

@@ -83,6 +83,11 @@ class JointLimits:
         ``<limit jerk=…>``, ``joint_limits.yaml``) or :meth:`Robot.with_limits`; inf where none
         (the default). Where any is finite, :func:`~nearopt.plan` times the path it finds under
         them (:func:`~nearopt.timing.time_with_jerk_limits`).
+    torque_rate
+        Actuator torque-rate limits |u̇_i| ≤ torque_rate_i [N·m/s or N/s] (an actuator's
+        bandwidth; no robot file declares one: :meth:`Robot.with_limits`); inf where none (the
+        default). Where any is finite, :func:`~nearopt.plan` times the path it finds with a C¹
+        timing that holds them (:mod:`nearopt.timing.rates`), as for jerk limits.
 
     Every array is made read-only; they must have one shape (n,), no NaN, and each lower limit at
     most its upper one (a :class:`~nearopt.ConfigurationError` otherwise).
@@ -96,6 +101,7 @@ class JointLimits:
     acceleration: NDArray[np.float64]
     names: tuple[str, ...] = ()
     jerk: NDArray[np.float64] | None = None
+    torque_rate: NDArray[np.float64] | None = None
 
     _ARRAYS = (
         "position_lower",
@@ -105,11 +111,13 @@ class JointLimits:
         "effort_upper",
         "acceleration",
         "jerk",
+        "torque_rate",
     )
 
     def __post_init__(self) -> None:
-        if self.jerk is None:
-            object.__setattr__(self, "jerk", np.full(np.shape(self.position_lower), np.inf))
+        for key in ("jerk", "torque_rate"):
+            if getattr(self, key) is None:
+                object.__setattr__(self, key, np.full(np.shape(self.position_lower), np.inf))
         for key in self._ARRAYS:
             object.__setattr__(self, key, _readonly(getattr(self, key)))
         n = self.position_lower.shape
@@ -138,6 +146,12 @@ class JointLimits:
                     f"{hi[i]:g}",
                     joint=self._joint(i),
                 )
+
+    @property
+    def smooth(self) -> bool:
+        """Whether a jerk or torque-rate limit is finite: a motion then needs θ̈ continuous
+        (a C¹ timing, :mod:`nearopt.timing.jerk`)."""
+        return bool(np.any(np.isfinite(self.jerk)) or np.any(np.isfinite(self.torque_rate)))
 
     def _name(self, i: int) -> str:
         return repr(self.names[i]) if self.names else str(i)
@@ -491,6 +505,7 @@ class Robot:
         damping: ArrayLike | None = None,
         acceleration: ArrayLike | None = None,
         jerk: ArrayLike | None = None,
+        torque_rate: ArrayLike | None = None,
     ) -> Robot:
         """A copy of this robot with some limits (or the damping) replaced.
 
@@ -511,6 +526,10 @@ class Robot:
         jerk
             Joint jerk limits |θ⃛_i| ≤ j_i [rad/s³ or m/s³], scalar or (n,); ``np.inf`` removes
             them (the default). :func:`~nearopt.plan` holds them for all t.
+        torque_rate
+            Torque-rate limits |u̇_i| ≤ r_i [N·m/s or N/s], scalar or (n,); ``np.inf`` removes
+            them (the default). :func:`~nearopt.plan` holds them (see
+            :attr:`JointLimits.torque_rate`).
 
         Raises
         ------
@@ -555,6 +574,11 @@ class Robot:
             jerks = self._joint_array(jerk, "jerk limit", allow_inf=True)
             self._check_positive(jerks, "jerk limit")
             jerks = np.where(jerks >= NO_LIMIT, np.inf, jerks)
+        rates = lim.torque_rate
+        if torque_rate is not None:
+            rates = self._joint_array(torque_rate, "torque-rate limit", allow_inf=True)
+            self._check_positive(rates, "torque-rate limit")
+            rates = np.where(rates >= NO_LIMIT, np.inf, rates)
         damp = self.damping
         if damping is not None:
             damp = self._joint_array(damping, "damping")
@@ -574,6 +598,7 @@ class Robot:
                 e_hi,
                 acc,
                 jerk=jerks,
+                torque_rate=rates,
             ),
             damping=damp,
             name=self.name,
@@ -629,8 +654,11 @@ class Robot:
             f"{'effort [lo, hi]':>22}{'damping':>10}{'|accel.|':>10}",
         ]
         jerk = np.any(np.isfinite(lim.jerk))  # a column where any joint has a jerk limit
+        rate = np.any(np.isfinite(lim.torque_rate))
         if jerk:
             rows[-1] += f"{'|jerk|':>10}"
+        if rate:
+            rows[-1] += f"{'|du/dt|':>10}"
         for i, jn in enumerate(self.joint_names):
             rows.append(
                 f"{jn:<28}{f'[{lim.position_lower[i]:.4g}, {lim.position_upper[i]:.4g}]':>24}"
@@ -638,6 +666,7 @@ class Robot:
                 f"{f'[{lim.effort_lower[i]:.4g}, {lim.effort_upper[i]:.4g}]':>22}"
                 f"{self.damping[i]:>10.4g}{lim.acceleration[i]:>10.4g}"
                 + (f"{lim.jerk[i]:>10.4g}" if jerk else "")
+                + (f"{lim.torque_rate[i]:>10.4g}" if rate else "")
             )
         return "\n".join(rows)
 

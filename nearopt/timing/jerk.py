@@ -65,6 +65,7 @@ from ..trajectory import InverseDynamics, Motion, MotionCost
 from ..validate import is_number
 from ._banded_kernels import implied_rows
 from .banded import BandedProgram, solve_banded, windows
+from .rates import TorqueRateCoefficients, torque_rate_coefficients
 from .solvers import TimingMethod
 
 __all__ = [
@@ -228,6 +229,7 @@ def jerk_limited_timing(
     tolerance: float = 1e-6,
     method: TimingMethod = TimingMethod.INTERIOR,
     time_limit: float = np.inf,
+    torque_rate: ArrayLike | None = None,
 ) -> JerkTiming:
     """The C¹ timing of ``path`` that minimises J = ∫ f0 dt (``cost``: time, the default, or
     :class:`~nearopt.TorqueCost`'s 1 + Σ w u²), from rest to rest with θ̈ = 0 at both ends, under
@@ -240,6 +242,11 @@ def jerk_limited_timing(
     (relative) or after ``max_iterations``. ``method``: each convex program by the banded kernel
     (:attr:`TimingMethod.INTERIOR`, Clarabel where it does not converge) or by Clarabel's SOCP
     (:attr:`TimingMethod.SOCP`); :attr:`JerkTiming.solvers` says which solved.
+
+    ``torque_rate`` [N·m/s or N/s], default the robot's
+    (:attr:`~nearopt.robot.JointLimits.torque_rate`): |u̇_i| ≤ r_i at the knots and midpoints of
+    the inner segments and wherever the check at 32 points per segment finds it beyond (like
+    the torque), by a bound on β on the end segments (see :mod:`nearopt.timing.rates`).
 
     ``time_limit`` [s]: past it no further iteration starts, and the best iterate so far is
     returned (:attr:`JerkTiming.timed_out`) — every iterate holds every limit, so it is a
@@ -258,9 +265,12 @@ def jerk_limited_timing(
     n = robot.n
     # the robot's checks of limits: one number or one per joint, > 0, inf for none
     checked = robot.with_limits(
-        jerk=jerk, acceleration=robot.limits.acceleration if acceleration is None else acceleration
+        jerk=jerk,
+        acceleration=robot.limits.acceleration if acceleration is None else acceleration,
+        torque_rate=robot.limits.torque_rate if torque_rate is None else torque_rate,
     )
     jerk, acc = checked.limits.jerk, checked.limits.acceleration
+    rate = checked.limits.torque_rate if np.any(np.isfinite(checked.limits.torque_rate)) else None
     for name, value, low in (("grid", grid, 4), ("max_iterations", max_iterations, 1)):
         if isinstance(value, bool) or not isinstance(value, int | np.integer) or value < low:
             raise ConfigurationError(f"{name} must be an integer ≥ {low}, got {value!r}")
@@ -282,10 +292,13 @@ def jerk_limited_timing(
             f"got {type(cost).__name__}"
         )
     s = _grid(path, grid)
-    model = _Model(robot, path, s, jerk, acc, torque, weights)
+    model = _Model(robot, path, s, jerk, acc, torque, weights, rate=rate)
     bbar = model.first_linearisation()
     x: NDArray[np.float64] | None = None
-    extra = (np.zeros(0, dtype=np.int64), np.zeros(0))
+    none = (np.zeros(0, dtype=np.int64), np.zeros(0))
+    rate_none = (*none, np.zeros(0))
+    extra, rate_extra = none, rate_none
+    checks: dict[str, TorqueRateCoefficients] = {}  # the torque rate's check points, once
     for _ in range(1 + REFINEMENTS):
         history: list[float] = []
         solvers: list[TimingMethod] = []
@@ -304,13 +317,13 @@ def jerk_limited_timing(
             bbar = np.maximum(x[model.iB], 1e-300)
         assert best is not None
         x = best[1]
-        if model.tq is None:
-            break
-        more = model.torque_excess(robot, path, x)
-        if not more[0].size:
+        more = none if model.tq is None else model.torque_excess(robot, path, x)
+        faster = rate_none if model.rp is None else model.rate_excess(robot, path, x, checks)
+        if not more[0].size and not faster[0].size:
             break
         extra = (np.concatenate([extra[0], more[0]]), np.concatenate([extra[1], more[1]]))
-        model = _Model(robot, path, s, jerk, acc, torque, weights, extra)
+        rate_extra = tuple(np.concatenate(pair) for pair in zip(rate_extra, faster, strict=True))
+        model = _Model(robot, path, s, jerk, acc, torque, weights, extra, rate, rate_extra)
         x = x[: model.iB[-1] + 1]  # b, m and B keep their places: the roots read them
     timing = model.timing(x, tuple(history), tuple(solvers), timed_out)
     return _slowed_down(timing, robot, path, acc, jerk)
@@ -459,6 +472,35 @@ class _Points:
         return self.m[:, :, None] * self.aw[:, None, :] + self.c[:, :, None] * self.bw[:, None, :]
 
 
+@dataclass(frozen=True)
+class _RatePoints:
+    """Points of the inner segments where the torque rate is held: u̇ = √b (L·x[cols] + g')
+    + E·x[cols] (:mod:`nearopt.timing.rates`), b = bw·x[cols]."""
+
+    cols: NDArray[np.int64]  # (P, 3): b_k, m_k, b_{k+1}
+    bw: NDArray[np.float64]  # (P, 3)
+    margin: NDArray[np.float64]  # (P,): the limit there is r (1 − margin)
+    lin: NDArray[np.float64]  # L, (P, n, 3)
+    const: NDArray[np.float64]  # g', (P, n)
+    damped: NDArray[np.float64]  # E, (P, n, 3)
+    coef: TorqueRateCoefficients
+    seg: NDArray[np.int64]  # (P,)
+
+
+def _rate_coefficients(
+    robot: Robot, path: Path, s0: NDArray, d: NDArray, x: NDArray
+) -> TorqueRateCoefficients:
+    """The torque rate's coefficients at σ = x of the segments [s0, s0 + d] (each (P,)), from
+    each segment's own cubic (θ', θ'', θ‴ from its midpoint: one-sided on a breakpoint)."""
+    mid = s0 + 0.5 * d
+    p1, p2, p3 = np.asarray(path(mid, 1)), np.asarray(path(mid, 2)), _third(path, mid)
+    u = ((x - 0.5) * d)[:, None]
+    q = np.asarray(path(s0 + x * d, 0))
+    return torque_rate_coefficients(
+        robot, q, p1 + p2 * u + 0.5 * p3 * u**2, p2 + p3 * u, p3, path.s_end
+    )
+
+
 class _Model:
     """The convex restriction at B̄ (see the module docstring): every row but the jerk rows'
     B_k coefficients and bounds is built once."""
@@ -473,9 +515,12 @@ class _Model:
         torque: bool,
         weights: NDArray[np.float64] | None = None,
         extra: tuple[NDArray, NDArray] | None = None,
+        rate: NDArray[np.float64] | None = None,
+        rate_extra: tuple[NDArray, NDArray, NDArray] | None = None,
     ) -> None:
         self.s, self.d = s, np.diff(s)
         self.extra = extra
+        self.rate, self.rate_extra = rate, rate_extra
         self.jerk = jerk
         big_n = self.d.size
         if big_n < 4:
@@ -507,8 +552,6 @@ class _Model:
 
         self.eq = self._equalities()
         ineq = _Rows()
-        one = np.ones((1, 1))
-        last = big_n - 1
         # inner segments: 0 ≤ each Bézier coefficient ≤ B_k
         for c in range(3):
             ineq.add(cols3[:, c : c + 1], -1.0, 0.0)
@@ -531,11 +574,7 @@ class _Model:
             rows = accel[:, :, j, :].reshape(-1, 3)
             for sign in (1.0, -1.0):
                 ineq.add(np.repeat(cols3, 5, axis=0), sign * rows, keep * acc[j])
-        # the end segments: bounds on β
-        for k, beta, sign in ((0, self.ib[1], 1.0), (last, self.ib[last], -1.0)):
-            cap = keep * self._end_cap(robot, path, k, sign, acc)
-            if np.isfinite(cap):
-                ineq.add(np.array([[beta]]), one, cap)
+        self._end_rows(ineq, robot, path, acc)
         self.limits, self.weights = lim, weights
         self.damped = bool(np.any(robot.damping))
         self.tq: _Points | None = None
@@ -551,6 +590,9 @@ class _Model:
             self.cp = self._cost_points(robot, path)
             self.ieps = self.nv + np.arange(self.cp.seg.size)
             self.nv += self.cp.seg.size
+        self.rp: _RatePoints | None = None
+        if rate is not None:
+            self.rp = self._rate_points(robot, path)
         self.fixed = ineq
         # the jerk rows: [Bézier coefficients, B_k] ≤ rhs, coefficients of B_k and rhs per B̄
         rows = []
@@ -560,6 +602,16 @@ class _Model:
                 rows.append((j, coef.reshape(-1, 3)))
         self.jerk_rows = rows
         self.cones = self._cones()
+
+    def _end_rows(self, rows: _Rows, robot: Robot, path: Path, acc: NDArray) -> None:
+        """The end segments' bounds on β (speed, acceleration, jerk, torque rate)."""
+        last = self.d.size - 1
+        for k, beta, sign in ((0, self.ib[1], 1.0), (last, self.ib[last], -1.0)):
+            cap = (1.0 - MARGIN) * min(
+                self._end_cap(robot, path, k, sign, acc), self._end_rate_cap(robot, path, k, sign)
+            )
+            if np.isfinite(cap):
+                rows.add(np.array([[beta]]), np.ones((1, 1)), cap)
 
     def _equalities(self) -> _Rows:
         """b_0 = b_N = 0, the unused variables of the end segments 0, and C¹ at the inner
@@ -615,6 +667,163 @@ class _Model:
             jerk = 1.001 * np.max(np.abs(shape), axis=0)
             caps.append(float(np.min((self.jerk / jerk) ** (2 / 3))))
         return min(caps)
+
+    def _end_rate_cap(self, robot: Robot, path: Path, k: int, sign: float) -> float:
+        """The largest β of end segment k under the torque-rate limits: there u̇ = β^{3/2} F +
+        β E + √β G with F, E, G functions of σ (b = β r^{4/3}, a = ±⅔ β r^{1/3}/Δ,
+        a' = 2/9 β r^{−2/3}/Δ²), |u̇| ≤ β^{3/2}|F| + β|E| + √β|G| increasing in β: the β where
+        its largest value over 400 points, 0.1 % more, reaches the limit (by bisection)."""
+        if self.rate is None:
+            return np.inf
+        d = self.d[k]
+        x = np.linspace(0.0, 1.0, 401)
+        x = x[1:] if sign > 0 else x[:-1]
+        r = (x if sign > 0 else 1.0 - x)[:, None]
+        coef = _rate_coefficients(robot, path, np.full(x.size, self.s[k]), np.full(x.size, d), x)
+        a, da = sign * (2 / 3) * r ** (1 / 3) / d, (2 / 9) * r ** (-2 / 3) / d**2
+        root = r ** (2 / 3)
+        big_f = np.abs(root * (coef.dm * a + coef.m * da + coef.dc * r ** (4 / 3) + 2 * coef.c * a))
+        big_e = np.abs(coef.ddelta * r ** (4 / 3) + coef.delta * a)
+        big_g = np.abs(root * coef.dg)
+        finite = np.isfinite(self.rate)
+
+        def worst(beta: float) -> float:
+            value = beta**1.5 * big_f + beta * big_e + np.sqrt(beta) * big_g
+            return float(np.max(1.001 * value[:, finite] / self.rate[finite]))
+
+        lo, hi = 0.0, 1.0
+        while worst(hi) <= 1.0 and hi < 1e300:
+            lo, hi = hi, hi * 1e3
+        if hi >= 1e300:
+            return np.inf
+        for _ in range(200):
+            mid = np.sqrt(lo * hi) if lo > 0.0 else 0.5 * hi
+            lo, hi = (mid, hi) if worst(mid) <= 1.0 else (lo, mid)
+            if hi - lo <= 1e-12 * hi:
+                break
+        return lo
+
+    def _rate_points(self, robot: Robot, path: Path) -> _RatePoints:
+        """The torque rate's points: both ends (u̇ jumps at a knot with a') and the middle of
+        every inner segment, and where a denser check found it beyond a limit (with the margin
+        :meth:`rate_excess` gives them)."""
+        inner = self.inner
+        seg = np.repeat(inner, 3)
+        sig = np.tile([0.0, 0.5, 1.0], inner.size)
+        margin = np.zeros(seg.size)
+        if self.rate_extra is not None:
+            seg = np.concatenate([seg, self.rate_extra[0]]).astype(np.int64)
+            sig = np.concatenate([sig, self.rate_extra[1]])
+            margin = np.concatenate([margin, self.rate_extra[2]])
+        d = self.d[seg]
+        coef = _rate_coefficients(robot, path, self.s[seg], d, sig)
+        bw = np.stack([(1 - sig) ** 2, 2 * sig * (1 - sig), sig**2], axis=1)
+        aw = np.stack([-(1 - sig), 1 - 2 * sig, sig], axis=1) / d[:, None]
+        daw = np.array([1.0, -2.0, 1.0])[None, :] / d[:, None] ** 2
+        lin, damped = coef.forms(bw, aw, daw)
+        cols = np.stack([self.ib[seg], self.im[seg], self.ib[seg + 1]], axis=1)
+        return _RatePoints(cols, bw, margin, lin, coef.dg, damped, coef, seg)
+
+    def _rate_rows(
+        self, rows: _Rows, bbar: NDArray[np.float64], previous: NDArray[np.float64] | None
+    ) -> None:
+        """|u̇_i| ≤ r_i at the rate points, for each sign: ±(L x + g') ≤ e/√b with b = bw·x
+        the point's own (e/√b is convex in x: bounded below by its tangent at the last iterate's
+        b̄, at first the segment's B̄ — a restriction the last iterate holds, as the jerk rows')
+        and, for a damped arm, ±E x ≤ r − e, with e the share of the limit left to
+        √b (L x + g'): r without damping, else at first r/2 and then the middle of what keeps
+        the last iterate feasible for both rows."""
+        pts, keep = self.rp, 1.0 - MARGIN
+        last = None if previous is None else previous[pts.cols]  # (P, 3)
+        bb = bbar[pts.seg] if last is None else np.einsum("pc,pc->p", pts.bw, last)
+        bb = np.maximum(bb, 1e-300)
+        for j in np.flatnonzero(np.isfinite(self.rate)):
+            r = self.rate[j] * (1.0 - pts.margin)
+            for sign in (1.0, -1.0):
+                lin, const = sign * pts.lin[:, j, :], sign * pts.const[:, j]
+                share = r.copy()
+                if self.damped:
+                    damped = sign * pts.damped[:, j, :]
+                    share = 0.5 * share
+                    if last is not None:
+                        low = np.sqrt(bb) * (np.einsum("pc,pc->p", lin, last) + const) / keep
+                        used = np.einsum("pc,pc->p", damped, last) / keep
+                        low, used = np.maximum(low, 0.0), np.maximum(used, 0.0)
+                        share = np.clip(0.5 * (low + r - used), 0.0, r)
+                    rows.add(pts.cols, damped, keep * (r - share))
+                slope, rhs = _jerk_tangent(share, bb)
+                rows.add(pts.cols, lin + slope[:, None] * pts.bw, rhs - const)
+
+    def rate_excess(
+        self,
+        robot: Robot,
+        path: Path,
+        x: NDArray[np.float64],
+        cache: dict[str, TorqueRateCoefficients],
+        per_segment: int = 32,
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """Where the solution's torque rate is beyond a limit (more than half the margin into
+        it): segments, σ and the relative margin of the rows there (see below). Checked at
+        ``per_segment`` points inside every inner segment and 3 more near each of its ends
+        (u̇'s slope may carry it beyond a limit just past a knot row), and at each joint's
+        largest |u̇| between them (the vertex of the parabola through the largest sample and
+        its neighbours: rows at points only leave u̇ free to bulge between them). The points'
+        coefficients are kept in ``cache`` for the next refinement."""
+        near = np.array([0.003, 0.01, 0.02])
+        grid = np.sort(
+            np.concatenate([near, np.linspace(0.0, 1.0, per_segment + 2)[1:-1], 1.0 - near])
+        )
+        seg = np.repeat(self.inner, grid.size)
+        sig = np.tile(grid, self.inner.size)
+        if "check" not in cache:
+            cache["check"] = _rate_coefficients(robot, path, self.s[seg], self.d[seg], sig)
+        rate = self._rates_at(cache["check"], x, seg, sig)
+        limit = (1.0 - 0.5 * MARGIN) * self.rate
+        over = np.any(rate > limit, axis=1)
+        # the peaks between the samples, where a sample comes near the limit
+        size = grid.size
+        values = rate.reshape(self.inner.size, size, -1)  # (K, S, n)
+        top = np.clip(np.argmax(values, axis=1), 1, size - 2)  # (K, n)
+        k_index = np.arange(self.inner.size)[:, None]
+        y0, y1, y2 = (values[k_index, top + o, np.arange(values.shape[2])] for o in (-1, 0, 1))
+        x0, x1, x2 = grid[top - 1], grid[top], grid[top + 1]
+        with np.errstate(divide="ignore", invalid="ignore"):
+            den = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0)
+            vertex = x1 - 0.5 * ((x1 - x0) ** 2 * (y1 - y2) - (x1 - x2) ** 2 * (y1 - y0)) / den
+        near_limit = (y1 >= y0) & (y1 >= y2) & (y1 > 0.99 * self.rate) & np.isfinite(vertex)
+        peak_seg = np.broadcast_to(self.inner[:, None], top.shape)[near_limit]
+        peak_sig = np.clip(vertex[near_limit], x0[near_limit], x2[near_limit])
+        peaks = np.zeros(0, dtype=bool)
+        if peak_seg.size:
+            coef = _rate_coefficients(robot, path, self.s[peak_seg], self.d[peak_seg], peak_sig)
+            peaks = np.any(self._rates_at(coef, x, peak_seg, peak_sig) > limit, axis=1)
+        # rows at a peak and, with a margin, at every sample of its segment: the optimum puts
+        # its peaks between its rows, above them by about |u̇''| h²/8 (h the rows' spacing; a
+        # row at the peak only moves the next peak next to it). The margin: twice that, |u̇''|
+        # from the parabola, relative to the limit, the largest over the segment's joints.
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bend = 2 * np.abs((y2 - y1) / (x2 - x1) - (y1 - y0) / (x1 - x0)) / (x2 - x0)
+        bend = (bend / self.rate)[near_limit][peaks]
+        spacing = float(np.max(np.diff(grid)))
+        dense, where = np.unique(peak_seg[peaks], return_inverse=True)
+        margins = np.zeros(dense.size)
+        np.maximum.at(margins, where, 2.0 * bend * spacing**2 / 8.0)
+        return (
+            np.concatenate([seg[over], peak_seg[peaks], np.repeat(dense, size)]).astype(np.int64),
+            np.concatenate([sig[over], peak_sig[peaks], np.tile(grid, dense.size)]),
+            np.concatenate([np.zeros(over.sum() + peaks.sum()), np.repeat(margins, size)]),
+        )
+
+    def _rates_at(
+        self, coef: TorqueRateCoefficients, x: NDArray[np.float64], seg: NDArray, sig: NDArray
+    ) -> NDArray[np.float64]:
+        """|u̇| of the solution x at σ = sig of the inner segments seg, shape (P, n)."""
+        d = self.d[seg]
+        b0, m, b1 = (x[index][seg] for index in (self.ib[:-1], self.im, self.ib[1:]))
+        b = (1 - sig) ** 2 * b0 + 2 * sig * (1 - sig) * m + sig**2 * b1
+        a = ((m - b0) * (1 - sig) + (b1 - m) * sig) / d
+        da = (b0 - 2 * m + b1) / d**2
+        return np.abs(coef.rate(b, a, da))
 
     def _points(self, robot: Robot, path: Path, seg: NDArray, x: NDArray) -> _Points:
         """The torque's pieces at σ = x on segments seg (on an end segment x is the distance
@@ -827,6 +1036,15 @@ class _Model:
             jcap = np.minimum(jcap, np.min((self.jerk * ramp) ** (2 / 3), axis=1))
         bbar = np.ones(self.d.size)
         bbar[self.inner] = np.clip(jcap, 1e-8, 1e6)
+        if self.rp is not None:  # √b |g'|, |c'| b^{3/2} and |D θ''| b each within r/4
+            coef, rate = self.rp.coef, self.rate
+            with np.errstate(divide="ignore"):
+                caps = np.minimum(
+                    (0.25 * rate / np.abs(coef.dg)) ** 2,
+                    (0.25 * rate / np.abs(coef.dc)) ** (2 / 3),
+                )
+                caps = np.minimum(caps, 0.25 * rate / np.abs(coef.ddelta))
+            np.minimum.at(bbar, self.rp.seg, np.maximum(np.min(caps, axis=1), 1e-12))
         return bbar
 
     def roots(self, points: _Points, x: NDArray[np.float64] | None, bbar: NDArray) -> NDArray:
@@ -859,6 +1077,8 @@ class _Model:
         roots = None if self.tq is None or not self.damped else self.roots(self.tq, previous, bbar)
         if roots is not None:
             self._torque_rows(torque, roots)
+        if self.rp is not None:
+            self._rate_rows(torque, bbar, previous)
         objective, offset = self._objective(bbar, previous)
         if method is TimingMethod.INTERIOR:
             answer = self._solve_banded(bbar, previous, torque, objective)
@@ -869,6 +1089,8 @@ class _Model:
         per_iteration = self._jerk_rows(bbar)
         if roots is not None:
             self._torque_rows(per_iteration, roots)
+        if self.rp is not None:
+            self._rate_rows(per_iteration, bbar, previous)
         x, value = self._solve_conic(bbar, per_iteration, objective)
         return x, value + offset
 
@@ -1069,6 +1291,9 @@ class _Model:
     def _jerk_windows(self) -> tuple[NDArray, ...]:
         """The jerk rows' b and m coefficients over z in window form, once: start, coefficients,
         B_k's place in each window, the segment and the joint of each row."""
+        if not self.jerk_rows:  # torque-rate limits only
+            none = np.zeros(0, dtype=np.int64)
+            return none, np.zeros((0, _WIDTH)), none, none, none
         rows = _Rows()
         joint = []
         for j, coef in self.jerk_rows:
@@ -1220,9 +1445,18 @@ class SmoothTrajectory(Motion):
         return self.timing.time_at(s)
 
     def states(self, t: ArrayLike) -> tuple[NDArray[np.float64], ...]:
-        """θ(t), θ̇(t), θ̈(t) in one pass, each of shape (M, n)."""
+        """θ(t), θ̇(t), θ̈(t) in one pass, each of shape (M, n). On the end segments b and a
+        come from the time to rest ρ in closed form (b = β ρ⁴, a = ±⅔ β ρ/Δ, ρ = √β τ/(3Δ)):
+        within ~1e-5 s of the end, s_e − s ∝ ρ³ falls below s's rounding."""
+        t = np.clip(np.atleast_1d(np.asarray(t, dtype=float)), 0.0, self.duration)
         s = self.path_parameter(t)
         b, a, _ = self.timing.evaluate(s)
+        d, beta, last = np.diff(self.s), self.timing.b, self.s.size - 2
+        for segment, tau, sign, k in ((0, t, 1.0, 1), (last, self.duration - t, -1.0, last)):
+            rho = np.clip(tau * np.sqrt(beta[k]) / (3.0 * d[segment]), 0.0, 1.0)
+            on = tau <= self.t[1] - self.t[0] if segment == 0 else t >= self.t[-2]
+            b = np.where(on, beta[k] * rho**4, b)
+            a = np.where(on, sign * (2 / 3) * beta[k] * rho / d[segment], a)
         d1 = self.path(s, 1)
         return (
             self.path(s, 0),
