@@ -5,12 +5,14 @@ of copp-py's TOPP3-LP (which holds the jerk at its stations only) on the same gr
 
 from __future__ import annotations
 
+import json
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import load
+from console import run_cli
 
 import nearopt
 from nearopt.timing import jerk_limited_timing, optimal_timing, time_with_jerk_limits
@@ -313,3 +315,30 @@ def test_small_and_huge_jerk_limits(jerk: float) -> None:
     assert np.max(np.abs(motion.jerk(t))) <= jerk
     if jerk == 1e6:
         assert timing.duration <= 1.03 * optimal_timing(robot, path, grid=100).duration
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda", "so101"])
+def test_the_1khz_record_of_a_jerk_limited_plan_replays(tmp_path: Path, name: str) -> None:
+    """The command's 1 kHz JSON of a plan under --jerk-limit J: θ̈ is J-Lipschitz, so θ̈ linear
+    between two samples takes the sampled θ̇ and θ to the next sample within J h²/4 and J h³/8
+    (h = 1 ms), and no sampling warning is given (the record is faithful at its rate)."""
+    robot = load(name)
+    lo = np.maximum(robot.limits.position_lower, -np.pi)
+    hi = np.minimum(robot.limits.position_upper, np.pi)
+    ends = ["--q0", *map(str, lo + 0.3 * (hi - lo)), "--qe", *map(str, lo + 0.7 * (hi - lo))]
+    target = tmp_path / "plan.json"
+    done = run_cli(
+        "plan", "--robot", name, *ends, "--max-iterations", "3", "--quiet",
+        "--json", str(target), "--jerk-limit", str(JERK),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    assert "warning" not in done.stderr
+    doc = json.loads(target.read_text())
+    t, q, qd, qdd = (np.array(doc[k]) for k in ("t", "q", "qd", "qdd"))
+    h = np.diff(t)[:, None]
+    assert np.max(h) <= 1e-3 * (1 + 1e-12)
+    speed = qd[:-1] + 0.5 * h * (qdd[:-1] + qdd[1:]) - qd[1:]
+    position = q[:-1] + h * qd[:-1] + h**2 * (qdd[:-1] / 3 + qdd[1:] / 6) - q[1:]
+    assert np.max(np.abs(speed)) <= JERK * 1e-6 / 4 * (1 + 1e-6)
+    assert np.max(np.abs(position)) <= JERK * 1e-9 / 8 * (1 + 1e-6)
+    assert np.max(np.abs(np.diff(qdd, axis=0)) / h) <= JERK * (1 + 1e-6)
