@@ -192,3 +192,28 @@ def test_a_jerk_limited_plan_gets_its_jerk_figure() -> None:
         peaks.append(np.max(np.abs(jerk)) / 300.0)
     assert 0.9 < max(peaks) <= 1.0
     assert {"jerks.png", "accelerations.png"} <= set(render_figures(result))
+
+
+def test_a_torque_rate_limited_plan_gets_its_torque_rate_figure() -> None:
+    """With torque-rate limits the figures include torque_rates.png: u̇_i(t) against ±r_i (by
+    differences of the torques, independent of the planner), reaching the limit and not
+    beyond it; without them there is none."""
+    from nearopt.viz.figures import plot_torque_rates, render_figures
+
+    robot = load("two_link").with_limits(torque_rate=400.0)
+    result = nearopt.plan(
+        robot, np.array([0.5, -0.5]), np.array([-0.4, 0.6]), max_iterations=1, grid=60
+    )
+    fig = plot_torque_rates(robot, result.trajectory, rate=2000.0)
+    peaks = []
+    for ax in fig.axes:
+        curve, *limits = ax.get_lines()
+        assert sorted(float(line.get_ydata()[0]) for line in limits) == [-400.0, 400.0]
+        assert ax.get_ylabel().endswith("[N·m/s]")
+        peaks.append(np.max(np.abs(curve.get_ydata())) / 400.0)
+    assert 0.9 < max(peaks) <= 1.0 + 1e-6
+    assert "torque_rates.png" in render_figures(result)
+    plain = nearopt.plan(
+        load("two_link"), np.array([0.5, -0.5]), np.array([-0.4, 0.6]), max_iterations=1
+    )
+    assert "torque_rates.png" not in render_figures(plain)

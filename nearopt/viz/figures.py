@@ -38,6 +38,7 @@ __all__ = [
     "plot_speeds",
     "plot_accelerations",
     "plot_jerks",
+    "plot_torque_rates",
     "prismatic",
     "plot_workspace",
     "plot_history",
@@ -203,6 +204,25 @@ def plot_jerks(robot: Robot, trajectory: Motion, rate: float = 2000.0) -> Figure
         (-j, j),
         ("d³θ/dt³", "rad/s³", "m/s³"),
         f"{robot.name}: joint jerks and limits (te = {trajectory.duration:.4f} s)",
+        _stops(trajectory),
+    )
+
+
+def plot_torque_rates(robot: Robot, trajectory: Motion, rate: float = 2000.0) -> Figure:
+    """u̇_i(t) of a motion, by central differences (±1e-6 s) of its torques, one panel per joint,
+    with the torque-rate limits ±r_i where the robot has any."""
+    t = np.linspace(0.0, trajectory.duration, max(2, int(trajectory.duration * rate) + 1))
+    ahead = np.minimum(t + 1e-6, trajectory.duration)
+    behind = np.maximum(t - 1e-6, 0.0)
+    rates = (trajectory.torque(ahead) - trajectory.torque(behind)) / (ahead - behind)[:, None]
+    r = robot.limits.torque_rate
+    return _joint_panels(
+        robot,
+        t,
+        rates,
+        (-r, r),
+        ("du/dt", "N·m/s", "N/s"),
+        f"{robot.name}: torque rates and limits (te = {trajectory.duration:.4f} s)",
         _stops(trajectory),
     )
 
@@ -397,8 +417,8 @@ def plot_history(
 
 def render_figures(result: Plan, reference: dict[int, float] | None = None) -> dict[str, bytes]:
     """torques.png, speeds.png (accelerations.png if the robot has acceleration or jerk limits,
-    jerks.png if it has jerk limits), workspace.png and history.png of a plan, as PNG bytes by
-    file name."""
+    jerks.png if it has jerk limits, torque_rates.png if it has torque-rate limits),
+    workspace.png and history.png of a plan, as PNG bytes by file name."""
     check_plan(result)
     plt = _pyplot()
     robot, traj = result.robot, result.trajectory
@@ -410,6 +430,8 @@ def render_figures(result: Plan, reference: dict[int, float] | None = None) -> d
         figures["accelerations.png"] = plot_accelerations(robot, traj)
     if np.any(np.isfinite(robot.limits.jerk)) and hasattr(traj, "jerk"):
         figures["jerks.png"] = plot_jerks(robot, traj)
+    if np.any(np.isfinite(robot.limits.torque_rate)):
+        figures["torque_rates.png"] = plot_torque_rates(robot, traj)
     figures["workspace.png"] = plot_workspace(
         robot,
         {"initial": result.initial_trajectory, "final": traj},
