@@ -297,7 +297,7 @@ def jerk_limited_timing(
     x: NDArray[np.float64] | None = None
     none = (np.zeros(0, dtype=np.int64), np.zeros(0))
     rate_none = (*none, np.zeros(0))
-    extra, rate_extra = none, rate_none
+    extra, rate_extra = rate_none, rate_none
     checks: dict[str, TorqueRateCoefficients] = {}  # the torque rate's check points, once
     for _ in range(1 + REFINEMENTS):
         history: list[float] = []
@@ -317,11 +317,11 @@ def jerk_limited_timing(
             bbar = np.maximum(x[model.iB], 1e-300)
         assert best is not None
         x = best[1]
-        more = none if model.tq is None else model.torque_excess(robot, path, x)
+        more = rate_none if model.tq is None else model.torque_excess(robot, path, x)
         faster = rate_none if model.rp is None else model.rate_excess(robot, path, x, checks)
         if not more[0].size and not faster[0].size:
             break
-        extra = (np.concatenate([extra[0], more[0]]), np.concatenate([extra[1], more[1]]))
+        extra = tuple(np.concatenate(pair) for pair in zip(extra, more, strict=True))
         rate_extra = tuple(np.concatenate(pair) for pair in zip(rate_extra, faster, strict=True))
         model = _Model(robot, path, s, jerk, acc, torque, weights, extra, rate, rate_extra)
         x = x[: model.iB[-1] + 1]  # b, m and B keep their places: the roots read them
@@ -487,6 +487,53 @@ class _RatePoints:
     seg: NDArray[np.int64]  # (P,)
 
 
+@dataclass(frozen=True)
+class _Peaks:
+    """Each segment's and joint's largest sample of a normalised load (1 at the limit) where it
+    is a local maximum above :data:`NEAR`: the segment's index, the vertex σ of the parabola
+    through it and its two neighbours, and |load''| there (per unit σ²)."""
+
+    index: NDArray[np.int64]
+    sigma: NDArray[np.float64]
+    bend: NDArray[np.float64]
+
+
+NEAR = 0.99
+"""A sample's load (1 at a limit) from which the peak between it and its neighbours is checked."""
+
+
+def _peaks(grid: NDArray[np.float64], load: NDArray[np.float64]) -> _Peaks:
+    """:class:`_Peaks` of ``load`` (K segments, S samples at σ = ``grid``, n joints)."""
+    size = grid.size
+    top = np.clip(np.argmax(load, axis=1), 1, size - 2)  # (K, n)
+    k_index = np.arange(load.shape[0])[:, None]
+    y0, y1, y2 = (load[k_index, top + o, np.arange(load.shape[2])] for o in (-1, 0, 1))
+    x0, x1, x2 = grid[top - 1], grid[top], grid[top + 1]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        den = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0)
+        vertex = x1 - 0.5 * ((x1 - x0) ** 2 * (y1 - y2) - (x1 - x2) ** 2 * (y1 - y0)) / den
+        bend = 2 * np.abs((y2 - y1) / (x2 - x1) - (y1 - y0) / (x1 - x0)) / (x2 - x0)
+    keep = (y1 >= y0) & (y1 >= y2) & (y1 > NEAR) & np.isfinite(vertex)
+    index = np.broadcast_to(np.arange(load.shape[0])[:, None], top.shape)[keep]
+    return _Peaks(index, np.clip(vertex[keep], x0[keep], x2[keep]), bend[keep])
+
+
+def _dense_rows(
+    grid: NDArray[np.float64], seg: NDArray[np.int64], bend: NDArray[np.float64]
+) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+    """Rows at every sample of each segment with a peak beyond a limit, with a margin: the
+    optimum puts its peaks between its rows, above them by about |load''| h²/8 (h the rows'
+    spacing; a row at the peak alone only moves the next peak next to it, a few times smaller
+    per refinement). The margin is twice that, the largest over the segment's peaks: segments,
+    σ and margins."""
+    spacing = float(np.max(np.diff(grid)))
+    dense, where = np.unique(seg, return_inverse=True)
+    margins = np.zeros(dense.size)
+    np.maximum.at(margins, where, 2.0 * bend * spacing**2 / 8.0)
+    size = grid.size
+    return np.repeat(dense, size), np.tile(grid, dense.size), np.repeat(margins, size)
+
+
 def _rate_coefficients(
     robot: Robot, path: Path, s0: NDArray, d: NDArray, x: NDArray
 ) -> TorqueRateCoefficients:
@@ -514,7 +561,7 @@ class _Model:
         acc: NDArray[np.float64],
         torque: bool,
         weights: NDArray[np.float64] | None = None,
-        extra: tuple[NDArray, NDArray] | None = None,
+        extra: tuple[NDArray, NDArray, NDArray] | None = None,
         rate: NDArray[np.float64] | None = None,
         rate_extra: tuple[NDArray, NDArray, NDArray] | None = None,
     ) -> None:
@@ -781,37 +828,17 @@ class _Model:
         limit = (1.0 - 0.5 * MARGIN) * self.rate
         over = np.any(rate > limit, axis=1)
         # the peaks between the samples, where a sample comes near the limit
-        size = grid.size
-        values = rate.reshape(self.inner.size, size, -1)  # (K, S, n)
-        top = np.clip(np.argmax(values, axis=1), 1, size - 2)  # (K, n)
-        k_index = np.arange(self.inner.size)[:, None]
-        y0, y1, y2 = (values[k_index, top + o, np.arange(values.shape[2])] for o in (-1, 0, 1))
-        x0, x1, x2 = grid[top - 1], grid[top], grid[top + 1]
-        with np.errstate(divide="ignore", invalid="ignore"):
-            den = (x1 - x0) * (y1 - y2) - (x1 - x2) * (y1 - y0)
-            vertex = x1 - 0.5 * ((x1 - x0) ** 2 * (y1 - y2) - (x1 - x2) ** 2 * (y1 - y0)) / den
-        near_limit = (y1 >= y0) & (y1 >= y2) & (y1 > 0.99 * self.rate) & np.isfinite(vertex)
-        peak_seg = np.broadcast_to(self.inner[:, None], top.shape)[near_limit]
-        peak_sig = np.clip(vertex[near_limit], x0[near_limit], x2[near_limit])
-        peaks = np.zeros(0, dtype=bool)
+        peaks = _peaks(grid, (rate / self.rate).reshape(self.inner.size, grid.size, -1))
+        peak_seg, peak_sig = self.inner[peaks.index], peaks.sigma
+        beyond = np.zeros(0, dtype=bool)
         if peak_seg.size:
             coef = _rate_coefficients(robot, path, self.s[peak_seg], self.d[peak_seg], peak_sig)
-            peaks = np.any(self._rates_at(coef, x, peak_seg, peak_sig) > limit, axis=1)
-        # rows at a peak and, with a margin, at every sample of its segment: the optimum puts
-        # its peaks between its rows, above them by about |u̇''| h²/8 (h the rows' spacing; a
-        # row at the peak only moves the next peak next to it). The margin: twice that, |u̇''|
-        # from the parabola, relative to the limit, the largest over the segment's joints.
-        with np.errstate(divide="ignore", invalid="ignore"):
-            bend = 2 * np.abs((y2 - y1) / (x2 - x1) - (y1 - y0) / (x1 - x0)) / (x2 - x0)
-        bend = (bend / self.rate)[near_limit][peaks]
-        spacing = float(np.max(np.diff(grid)))
-        dense, where = np.unique(peak_seg[peaks], return_inverse=True)
-        margins = np.zeros(dense.size)
-        np.maximum.at(margins, where, 2.0 * bend * spacing**2 / 8.0)
+            beyond = np.any(self._rates_at(coef, x, peak_seg, peak_sig) > limit, axis=1)
+        dense = _dense_rows(grid, peak_seg[beyond], peaks.bend[beyond])
         return (
-            np.concatenate([seg[over], peak_seg[peaks], np.repeat(dense, size)]).astype(np.int64),
-            np.concatenate([sig[over], peak_sig[peaks], np.tile(grid, dense.size)]),
-            np.concatenate([np.zeros(over.sum() + peaks.sum()), np.repeat(margins, size)]),
+            np.concatenate([seg[over], peak_seg[beyond], dense[0]]).astype(np.int64),
+            np.concatenate([sig[over], peak_sig[beyond], dense[1]]),
+            np.concatenate([np.zeros(over.sum() + beyond.sum()), dense[2]]),
         )
 
     def _rates_at(
@@ -884,27 +911,50 @@ class _Model:
         sig = np.concatenate([np.tile([0.0, 0.5], big_n), [1.0]])
         keep = ~(((seg == 0) & (sig == 0.0)) | ((seg == big_n - 1) & (sig == 1.0)))
         seg, sig = seg[keep], sig[keep]
+        self.tq_margin = np.zeros(seg.size)
         if self.extra is not None:  # where a denser check found the torque beyond a limit
             seg, sig = np.concatenate([seg, self.extra[0]]), np.concatenate([sig, self.extra[1]])
+            self.tq_margin = np.concatenate([self.tq_margin, self.extra[2]])
         return self._points(robot, path, seg, sig)
 
     def torque_excess(
         self, robot: Robot, path: Path, x: NDArray[np.float64], per_segment: int = 32
-    ) -> tuple[NDArray[np.int64], NDArray[np.float64]]:
-        """The points among ``per_segment`` inside every segment where the solution's torque
-        is beyond a limit (more than half the margin into it): segments and σ."""
+    ) -> tuple[NDArray[np.int64], NDArray[np.float64], NDArray[np.float64]]:
+        """Where the solution's torque is beyond a limit (more than half the margin into it):
+        segments, σ and the relative margin of the rows there. Checked at ``per_segment``
+        points inside every segment and at each joint's largest load between them (the vertex
+        of a parabola, as :meth:`rate_excess`); a segment with such a peak gets rows at every
+        point with the margin of :func:`_dense_rows`."""
         big_n = self.d.size
-        sig = np.linspace(0.0, 1.0, per_segment + 2)[1:-1]
-        seg = np.repeat(np.arange(big_n), sig.size)
-        sig = np.tile(sig, big_n)
+        grid = np.linspace(0.0, 1.0, per_segment + 2)[1:-1]
+        seg = np.repeat(np.arange(big_n), grid.size)
+        sig = np.tile(grid, big_n)
+        u = self._torques_at(robot, path, x, seg, sig)
+        lim, keep = self.limits, 1.0 - 0.5 * MARGIN
+        over = np.any((u > keep * lim.effort_upper) | (u < keep * lim.effort_lower), axis=1)
+        scale = np.maximum(np.abs(lim.effort_upper), np.abs(lim.effort_lower))
+        load = 1.0 + np.maximum(u - lim.effort_upper, lim.effort_lower - u) / scale
+        peaks = _peaks(grid, load.reshape(big_n, grid.size, -1))
+        beyond = np.zeros(0, dtype=bool)
+        if peaks.index.size:
+            v = self._torques_at(robot, path, x, peaks.index, peaks.sigma)
+            beyond = np.any((v > keep * lim.effort_upper) | (v < keep * lim.effort_lower), 1)
+        dense = _dense_rows(grid, peaks.index[beyond], peaks.bend[beyond])
+        return (
+            np.concatenate([seg[over], peaks.index[beyond], dense[0]]).astype(np.int64),
+            np.concatenate([sig[over], peaks.sigma[beyond], dense[1]]),
+            np.concatenate([np.zeros(over.sum() + beyond.sum()), dense[2]]),
+        )
+
+    def _torques_at(
+        self, robot: Robot, path: Path, x: NDArray[np.float64], seg: NDArray, sig: NDArray
+    ) -> NDArray[np.float64]:
+        """u of the solution x at σ = sig of the segments seg, shape (P, n)."""
         pts = self._points(robot, path, seg, sig)
         columns = x[pts.cols]  # (P, 3)
         root = np.maximum(np.einsum("pc,pc->p", pts.root_w, columns), 0.0)
         u = np.einsum("pnc,pc->pn", pts.affine(), columns) + pts.g
-        u += pts.delta * (pts.kappa * np.sqrt(root))[:, None]
-        lim, keep = self.limits, 1.0 - 0.5 * MARGIN
-        over = np.any((u > keep * lim.effort_upper) | (u < keep * lim.effort_lower), axis=1)
-        return seg[over], sig[over]
+        return u + pts.delta * (pts.kappa * np.sqrt(root))[:, None]
 
     def _torque_rows(self, rows: _Rows, bbar: NDArray[np.float64]) -> None:
         """u within the effort limits at the torque points: A x + δ√b ≤ U − g and the lower
@@ -919,7 +969,8 @@ class _Model:
             for j in np.flatnonzero(finite):
                 delta = sign * pts.delta[:, j] * pts.kappa  # its share of sign·u / √root
                 vals = sign * a[:, j, :]
-                h = keep * bound[j] - sign * pts.g[:, j]
+                scale = max(abs(lim.effort_upper[j]), abs(lim.effort_lower[j]))
+                h = keep * bound[j] - self.tq_margin * scale - sign * pts.g[:, j]
                 if not np.any(delta):
                     rows.add(pts.cols, vals, h)
                     continue
