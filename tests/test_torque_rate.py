@@ -175,3 +175,22 @@ def test_verify_fails_a_motion_whose_torque_jumps() -> None:
 def test_a_bad_torque_rate_limit_names_the_joint(value: object, message: str) -> None:
     with pytest.raises(nearopt.ConfigurationError, match=message):
         nearopt.Robot.from_name("two_link").with_limits(torque_rate=value)
+
+
+@pytest.mark.parametrize(("name", "seed", "rate"), [("panda", 0, 5.0), ("xarm7", 0, 1.0)])
+def test_small_limits_on_damped_arms_give_slow_timings_that_hold_them(
+    name: str, seed: int, rate: float
+) -> None:
+    """Limits far below the motion's natural rates on damped arms (a fuzz pass's cases, which
+    ended in the convex solver's 'infeasible' or 'insufficient progress'): after a refinement
+    the last iterate is first slowed down until the new points hold (a restriction linearised
+    where it breaks them may hold no timing), so a long motion comes back, holding the limit
+    at 2 kHz (the motions last 60–180 s) and binding."""
+    robot = load(name).with_limits(acceleration=ACCELERATION)
+    path = _spline(robot, seed)
+    timing = jerk_limited_timing(robot, path, JERK, grid=60, torque_rate=rate)
+    motion = SmoothTrajectory(path, timing, robot.inverse_dynamics_batch)
+    free = jerk_limited_timing(robot, path, JERK, grid=60)
+    assert timing.duration > 3 * free.duration
+    ratio = np.max(np.abs(_rates(robot, motion, _inside(motion, int(2_000 * motion.duration)))))
+    assert 0.99 < ratio / rate <= 1.0 + 1e-6

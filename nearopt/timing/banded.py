@@ -55,13 +55,16 @@ class BandedProgram(NamedTuple):
 
 
 class BandedSolution(NamedTuple):
-    """z, whether it converged, the Newton iterations, F(z) and a message."""
+    """z, whether it converged, the Newton iterations, F(z), a message and the largest row
+    residual |c + s| at z (the rows scaled to a largest coefficient of 1; with s ≥ 0, how far
+    z may lie beyond a row)."""
 
     z: NDArray[np.float64]
     converged: bool
     iterations: int
     value: float
     message: str
+    primal: float = np.inf
 
 
 def windows(
@@ -127,7 +130,9 @@ def solve_banded(
     }
     message = messages.get(status, f"not converged in {max_iterations} iterations")
     message += f" (Σ s y {gap:.1e}, |∇L| {dual:.1e}, |c + s| {primal:.1e})"
-    return BandedSolution(z, status == CONVERGED, int(iterations), float(value), message)
+    return BandedSolution(
+        z, status == CONVERGED, int(iterations), float(value), message, float(primal)
+    )
 
 
 def _gather(z: NDArray, start: NDArray, width: int) -> NDArray:

@@ -244,9 +244,10 @@ def jerk_limited_timing(
     (:attr:`TimingMethod.SOCP`); :attr:`JerkTiming.solvers` says which solved.
 
     ``torque_rate`` [N·m/s or N/s], default the robot's
-    (:attr:`~nearopt.robot.JointLimits.torque_rate`): |u̇_i| ≤ r_i at the knots and midpoints of
-    the inner segments and wherever the check at 32 points per segment finds it beyond (like
-    the torque), by a bound on β on the end segments (see :mod:`nearopt.timing.rates`).
+    (:attr:`~nearopt.robot.JointLimits.torque_rate`): |u̇_i| ≤ r_i at the ends and middles of
+    the inner segments and wherever the check at 38 points per segment (and at the peaks
+    between them) finds it beyond, by a bound on β on the end segments (see
+    :mod:`nearopt.timing.rates`).
 
     ``time_limit`` [s]: past it no further iteration starts, and the best iterate so far is
     returned (:attr:`JerkTiming.timed_out`) — every iterate holds every limit, so it is a
@@ -256,9 +257,9 @@ def jerk_limited_timing(
     Raises
     ------
     ConfigurationError
-        Jerk or acceleration limits that are not positive numbers (one, or one per joint), a
-        grid below 4 segments, ``max_iterations`` below 1, another cost or another method, a
-        time limit that is not a number ≥ 0.
+        Jerk, acceleration or torque-rate limits that are not positive numbers (one, or one
+        per joint), a grid below 4 segments, ``max_iterations`` below 1, another cost or
+        another method, a time limit that is not a number ≥ 0.
     SolverError
         If a convex program fails.
     """
@@ -299,12 +300,21 @@ def jerk_limited_timing(
     rate_none = (*none, np.zeros(0))
     extra, rate_extra = rate_none, rate_none
     checks: dict[str, TorqueRateCoefficients] = {}  # the torque rate's check points, once
+    fallback: tuple[float, NDArray[np.float64]] | None = None
+    history: list[float] = []
+    solvers: list[TimingMethod] = []
     for _ in range(1 + REFINEMENTS):
-        history: list[float] = []
-        solvers: list[TimingMethod] = []
-        best: tuple[float, NDArray[np.float64]] | None = None
+        best = fallback
+        if fallback is None:
+            history, solvers = [], []
         for _ in range(max_iterations):
-            x, value = model.solve(bbar, x, method)
+            try:
+                x, value = model.solve(bbar, x, method)
+            except SolverError:
+                if best is None:  # (no iterate of these rows yet)
+                    raise
+                x = best[1]
+                break  # every iterate so far (or the slowed-down last one) holds every row
             history.append(value)
             solvers.append(model.solver)
             if best is None or value < best[0]:  # (equal up to the solver's 1e-8)
@@ -324,7 +334,11 @@ def jerk_limited_timing(
         extra = tuple(np.concatenate(pair) for pair in zip(extra, more, strict=True))
         rate_extra = tuple(np.concatenate(pair) for pair in zip(rate_extra, faster, strict=True))
         model = _Model(robot, path, s, jerk, acc, torque, weights, extra, rate, rate_extra)
-        x = x[: model.iB[-1] + 1]  # b, m and B keep their places: the roots read them
+        x = model.within_rates(x[: model.iB[-1] + 1])  # b, m and B keep their places
+        bbar = np.maximum(x[model.iB], 1e-300)
+        # with new torque-rate points only, the slowed-down x holds every row of the new model:
+        # where its first program fails, it is the timing (its J above the last program's)
+        fallback = (np.inf, x) if not more[0].size else None
     timing = model.timing(x, tuple(history), tuple(solvers), timed_out)
     return _slowed_down(timing, robot, path, acc, jerk)
 
@@ -779,11 +793,11 @@ class _Model:
         b̄, at first the segment's B̄ — a restriction the last iterate holds, as the jerk rows')
         and, for a damped arm, ±E x ≤ r − e, with e the share of the limit left to
         √b (L x + g'): r without damping, else at first r/2 and then the middle of what keeps
-        the last iterate feasible for both rows."""
+        the last iterate feasible for both rows (:meth:`within_rates` makes it feasible)."""
         pts, keep = self.rp, 1.0 - MARGIN
         last = None if previous is None else previous[pts.cols]  # (P, 3)
         bb = bbar[pts.seg] if last is None else np.einsum("pc,pc->p", pts.bw, last)
-        bb = np.maximum(bb, 1e-300)
+        bb = np.maximum(bb, 1e-12 * float(np.max(bbar)))  # (b̄^{-3/2} finite)
         for j in np.flatnonzero(np.isfinite(self.rate)):
             r = self.rate[j] * (1.0 - pts.margin)
             for sign in (1.0, -1.0):
@@ -796,10 +810,45 @@ class _Model:
                         low = np.sqrt(bb) * (np.einsum("pc,pc->p", lin, last) + const) / keep
                         used = np.einsum("pc,pc->p", damped, last) / keep
                         low, used = np.maximum(low, 0.0), np.maximum(used, 0.0)
-                        share = np.clip(0.5 * (low + r - used), 0.0, r)
+                        with np.errstate(divide="ignore", invalid="ignore"):
+                            part = np.clip(used / (low + used), 0.05, 0.95)
+                        part = np.where(np.isfinite(part), part, 0.5)
+                        share = np.clip(low + (1.0 - part) * (r - used - low), 0.0, r)
                     rows.add(pts.cols, damped, keep * (r - share))
                 slope, rhs = _jerk_tangent(share, bb)
                 rows.add(pts.cols, lin + slope[:, None] * pts.bw, rhs - const)
+
+    def within_rates(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """x slowed down uniformly (b, m, B times κ ≤ 1: the speed, acceleration and jerk only
+        fall, the undamped torque moves toward g) until the torque rate holds at every rate
+        point — after a refinement the last iterate breaks the new points' rows, and a
+        restriction linearised there might hold no timing at all. As κ → 0, u̇ → √κ √b g' → 0:
+        the first κ of a geometric sequence (ratio 0.9) that holds them, then bisection
+        toward the one before it (the largest κ there that holds them, to 1e-6)."""
+        if self.rp is None:
+            return x
+        pts, keep = self.rp, 1.0 - MARGIN
+        columns = x[pts.cols]
+        b = np.maximum(np.einsum("pc,pc->p", pts.bw, columns), 0.0)
+        lin = np.einsum("pnc,pc->pn", pts.lin, columns)
+        damped = np.einsum("pnc,pc->pn", pts.damped, columns)
+        limit = keep * self.rate[None, :] * (1.0 - pts.margin)[:, None]
+        finite = np.isfinite(self.rate)
+
+        def holds(kappa: float) -> bool:
+            rate = np.sqrt(kappa * b)[:, None] * (kappa * lin + pts.const) + kappa * damped
+            return bool(np.all(np.abs(rate[:, finite]) <= limit[:, finite]))
+
+        kappa = 1.0
+        for _ in range(400):
+            if holds(kappa):
+                break
+            kappa *= 0.9
+        high = min(kappa / 0.9, 1.0)
+        while kappa < 1.0 and high - kappa > 1e-6 * high:
+            middle = 0.5 * (kappa + high)
+            kappa, high = (middle, high) if holds(middle) else (kappa, middle)
+        return x * kappa
 
     def rate_excess(
         self,
@@ -1095,7 +1144,12 @@ class _Model:
                     (0.25 * rate / np.abs(coef.dc)) ** (2 / 3),
                 )
                 caps = np.minimum(caps, 0.25 * rate / np.abs(coef.ddelta))
-            np.minimum.at(bbar, self.rp.seg, np.maximum(np.min(caps, axis=1), 1e-12))
+            np.minimum.at(bbar, self.rp.seg, np.maximum(np.min(caps, axis=1), 1e-300))
+        # and the speed limits' (else, with no jerk limit, B̄ = 1e6 sets the solver's units far
+        # from b: kinova's b ~ 1e-4 came out at 1e-10 of them)
+        with np.errstate(divide="ignore"):
+            speed = np.min((self.limits.velocity / np.maximum(self.slope_peak, 1e-300)) ** 2, 1)
+        bbar[self.inner] = np.minimum(bbar[self.inner], np.maximum(speed, 1e-300))
         return bbar
 
     def roots(self, points: _Points, x: NDArray[np.float64] | None, bbar: NDArray) -> NDArray:
@@ -1387,7 +1441,10 @@ class _Model:
         )  # fmt: skip
         z0 = self._banded_start(bbar, previous) / unit
         solution = solve_banded(program, z0, tolerance=1e-9)
-        if not solution.converged:
+        stalled = previous is not None and solution.primal <= 1e-9 and solution.iterations > 0
+        if not solution.converged and not (stalled and np.isfinite(solution.value)):
+            # (a later program that stalls on its optimality test at a feasible point gives a
+            # feasible iterate: the iterations keep the best)
             return None
         return unit * (self.reduction @ solution.z), solution.value
 
