@@ -29,8 +29,9 @@ from nearopt.timing import TimingMethod, jerk_limited_timing, load_kernel, optim
 JERK, ACCELERATION, RATE = 50.0, 10.0, 10_000.0
 
 
-def copp_topp3(robot: nearopt.Robot, path: nearopt.Path, sigma: np.ndarray):
-    """copp-py's TOPP3-LP: (duration, wall time, s at 10 kHz)."""
+def copp_topp3(robot: nearopt.Robot, path: nearopt.Path, sigma: np.ndarray, rows=None):
+    """copp-py's TOPP3-LP: (duration, wall time, s at 10 kHz); ``rows(crobot)`` adds more rows
+    (its clock included)."""
     start = time.perf_counter()
     crobot = copp.Robot(robot.n, capacity=sigma.size)
     crobot.append_s(sigma)
@@ -39,6 +40,8 @@ def copp_topp3(robot: nearopt.Robot, path: nearopt.Path, sigma: np.ndarray):
     crobot.add_velocity_limits(v, -v, start_idx_s=0, length=sigma.size)
     crobot.add_acceleration_limits(a, -a, start_idx_s=0, length=sigma.size)
     crobot.add_jerk_limits(j, -j, start_idx_s=0, length=sigma.size)
+    if rows is not None:
+        rows(crobot)
     ra = copp.solver.topp2_ra
     first = ra.Problem(
         crobot.constraints, idx_s_interval=(0, sigma.size - 1), a_boundary=(0.0, 0.0)

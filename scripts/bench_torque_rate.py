@@ -23,7 +23,7 @@ import time
 
 import copp_py as copp
 import numpy as np
-from bench_jerk import ACCELERATION, JERK
+from bench_jerk import ACCELERATION, JERK, copp_topp3
 from bench_timing import spline
 
 import nearopt
@@ -37,38 +37,21 @@ RATE = 10_000.0
 def copp_torque_rate(
     robot: nearopt.Robot, path: nearopt.Path, sigma: np.ndarray, rate: np.ndarray
 ) -> tuple[float, float, np.ndarray]:
-    """copp-py's TOPP3-LP with jerk, acceleration, speed and torque-rate rows (linearised at
-    its TOPP2-RA profile, then twice at its own): (duration, wall time, s at 10 kHz)."""
-    start = time.perf_counter()
-    q1, q2, q3 = path(sigma, 1), path(sigma, 2), np.asarray(path(sigma, 3))
-    coef = torque_rate_coefficients(robot, path(sigma, 0), q1, q2, q3, path.s_end)
-    crobot = copp.Robot(robot.n, capacity=sigma.size)
-    crobot.append_s(sigma)
-    crobot.set_q(path(sigma, 0), q1, q2, 0, dddq=q3)
-    v, a, j = robot.limits.velocity, np.full(robot.n, ACCELERATION), np.full(robot.n, JERK)
-    crobot.add_velocity_limits(v, -v, start_idx_s=0, length=sigma.size)
-    crobot.add_acceleration_limits(a, -a, start_idx_s=0, length=sigma.size)
-    crobot.add_jerk_limits(j, -j, start_idx_s=0, length=sigma.size)
-    limit = np.broadcast_to(rate, q1.shape).copy()
-    for sign in (1.0, -1.0):
-        crobot.constraints.add_constraint_3rd(
-            sign * coef.dc, sign * (coef.dm + 2 * coef.c), sign * coef.m, sign * coef.dg, limit, 0
-        )
-    ra = copp.solver.topp2_ra
-    first = ra.Problem(
-        crobot.constraints, idx_s_interval=(0, sigma.size - 1), a_boundary=(0.0, 0.0)
-    )
-    a_lin, b_lin = np.maximum(np.asarray(ra.solve(first, ra.Options())), 1e-6), None
-    for _ in range(3):
-        problem = copp.solver.topp3_lp.Problem(
-            crobot.constraints, a_lin, b_linearization=b_lin, num_stationary_max=1
-        )
-        profile = copp.solver.topp3_lp.solve(problem)
-        a_lin, b_lin = np.maximum(np.asarray(profile.a), 1e-10), np.asarray(profile.b)
-    wall = time.perf_counter() - start
-    duration, t_s = copp.interpolation.s_to_t_topp3(sigma, profile)
-    s_t = copp.interpolation.t_to_s_topp3_uniform(sigma, profile, t_s, 1.0 / RATE)
-    return duration, wall, np.asarray(s_t)
+    """copp-py's TOPP3-LP with jerk, acceleration, speed and torque-rate rows
+    (``bench_jerk.copp_topp3`` with the torque-rate rows added): (duration, wall time, s at
+    10 kHz)."""
+
+    def rows(crobot) -> None:
+        q1, q2, q3 = path(sigma, 1), path(sigma, 2), np.asarray(path(sigma, 3))
+        coef = torque_rate_coefficients(robot, path(sigma, 0), q1, q2, q3, path.s_end)
+        limit = np.broadcast_to(rate, q1.shape).copy()
+        for sign in (1.0, -1.0):
+            crobot.constraints.add_constraint_3rd(
+                sign * coef.dc, sign * (coef.dm + 2 * coef.c), sign * coef.m, sign * coef.dg,
+                limit, 0,
+            )  # fmt: skip
+
+    return copp_topp3(robot, path, sigma, rows)
 
 
 def copp_excess(robot: nearopt.Robot, path: nearopt.Path, s_t: np.ndarray, rate: np.ndarray):
