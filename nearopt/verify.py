@@ -40,6 +40,7 @@ __all__ = [
     "Tolerances",
     "verify",
     "verify_plan",
+    "torque_rates",
 ]
 
 
@@ -492,6 +493,20 @@ class _Sampled:
         return cls(t, q, qd, qdd, u, jerk, rate)
 
 
+def torque_rates(
+    robot: Robot, trajectory: Motion, t: ArrayLike, pool: pin.ModelPool | None = None
+) -> NDArray[np.float64]:
+    """u̇ [N·m/s or N/s] at the times t [s], shape (M, n), from the motion's states alone:
+    central differences of RNEA + D θ̇ over ±:data:`RATE_STEP` (one-sided at 0 and t_e; where
+    u̇ jumps, at a knot of a C¹ timing, one across lies between the two sides)."""
+    t = np.atleast_1d(np.asarray(t, dtype=float))
+    pool = robot.new_pool() if pool is None else pool
+    ahead = np.minimum(t + RATE_STEP, trajectory.duration)
+    behind = np.maximum(t - RATE_STEP, 0.0)
+    u1, u0 = (_torques(robot, pool, *trajectory.states(x)) for x in (ahead, behind))
+    return (u1 - u0) / np.maximum(ahead - behind, 1e-300)[:, None]
+
+
 def _torque_rates(
     trajectory: Motion,
     robot: Robot,
@@ -499,15 +514,10 @@ def _torque_rates(
     t: NDArray[np.float64],
     u: NDArray[np.float64],
 ) -> NDArray[np.float64]:
-    """u̇ at the times t, from the motion's states alone: central differences of the torques
-    over ±:data:`RATE_STEP` (one-sided at 0 and t_e; where u̇ jumps, at a knot of a C¹ timing,
-    one across lies between the two sides), or the mean rate over the step to the next sample
-    where that is larger (|u̇| ≤ r for all t bounds it too; it catches a jump of u between the
-    samples, which a stage-1 timing makes at every knot)."""
-    ahead = np.minimum(t + RATE_STEP, trajectory.duration)
-    behind = np.maximum(t - RATE_STEP, 0.0)
-    u1, u0 = (_torques(robot, pool, *trajectory.states(x)) for x in (ahead, behind))
-    rate = (u1 - u0) / np.maximum(ahead - behind, 1e-300)[:, None]
+    """:func:`torque_rates` at the samples t, or the mean rate over the step to the next
+    sample where that is larger (|u̇| ≤ r for all t bounds it too; it catches a jump of u
+    between the samples, which a stage-1 timing makes at every knot)."""
+    rate = torque_rates(robot, trajectory, t, pool)
     if t.size > 1:
         mean = np.diff(u, axis=0) / np.maximum(np.diff(t), 1e-300)[:, None]
         larger = np.abs(mean) > np.abs(rate[:-1])

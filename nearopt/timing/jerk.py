@@ -495,7 +495,6 @@ class _RatePoints:
     bw: NDArray[np.float64]  # (P, 3)
     margin: NDArray[np.float64]  # (P,): the limit there is r (1 − margin)
     lin: NDArray[np.float64]  # L, (P, n, 3)
-    const: NDArray[np.float64]  # g', (P, n)
     damped: NDArray[np.float64]  # E, (P, n, 3)
     coef: TorqueRateCoefficients
     seg: NDArray[np.int64]  # (P,)
@@ -783,7 +782,7 @@ class _Model:
         daw = np.array([1.0, -2.0, 1.0])[None, :] / d[:, None] ** 2
         lin, damped = coef.forms(bw, aw, daw)
         cols = np.stack([self.ib[seg], self.im[seg], self.ib[seg + 1]], axis=1)
-        return _RatePoints(cols, bw, margin, lin, coef.dg, damped, coef, seg)
+        return _RatePoints(cols, bw, margin, lin, damped, coef, seg)
 
     def _rate_rows(
         self, rows: _Rows, bbar: NDArray[np.float64], previous: NDArray[np.float64] | None
@@ -801,7 +800,7 @@ class _Model:
         for j in np.flatnonzero(np.isfinite(self.rate)):
             r = self.rate[j] * (1.0 - pts.margin)
             for sign in (1.0, -1.0):
-                lin, const = sign * pts.lin[:, j, :], sign * pts.const[:, j]
+                lin, const = sign * pts.lin[:, j, :], sign * pts.coef.dg[:, j]
                 share = r.copy()
                 if self.damped:
                     damped = sign * pts.damped[:, j, :]
@@ -836,7 +835,7 @@ class _Model:
         finite = np.isfinite(self.rate)
 
         def holds(kappa: float) -> bool:
-            rate = np.sqrt(kappa * b)[:, None] * (kappa * lin + pts.const) + kappa * damped
+            rate = np.sqrt(kappa * b)[:, None] * (kappa * lin + pts.coef.dg) + kappa * damped
             return bool(np.all(np.abs(rate[:, finite]) <= limit[:, finite]))
 
         kappa = 1.0
@@ -893,13 +892,9 @@ class _Model:
     def _rates_at(
         self, coef: TorqueRateCoefficients, x: NDArray[np.float64], seg: NDArray, sig: NDArray
     ) -> NDArray[np.float64]:
-        """|u̇| of the solution x at σ = sig of the inner segments seg, shape (P, n)."""
-        d = self.d[seg]
-        b0, m, b1 = (x[index][seg] for index in (self.ib[:-1], self.im, self.ib[1:]))
-        b = (1 - sig) ** 2 * b0 + 2 * sig * (1 - sig) * m + sig**2 * b1
-        a = ((m - b0) * (1 - sig) + (b1 - m) * sig) / d
-        da = (b0 - 2 * m + b1) / d**2
-        return np.abs(coef.rate(b, a, da))
+        """|u̇| of the solution x at σ = sig (inside) of the inner segments seg, shape (P, n)."""
+        at = self.s[seg] + sig * self.d[seg]
+        return np.abs(coef.rate(*self.timing(x, ()).evaluate(at)))
 
     def _points(self, robot: Robot, path: Path, seg: NDArray, x: NDArray) -> _Points:
         """The torque's pieces at σ = x on segments seg (on an end segment x is the distance

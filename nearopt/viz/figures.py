@@ -22,6 +22,7 @@ import numpy as np
 
 from ..outputs import make_folder, write_atomically
 from ..planning import Plan, TaskResult, check_plan
+from ..verify import torque_rates
 from .geometry import chain_points, plane_axes, target_poses, tip_path
 
 if TYPE_CHECKING:
@@ -209,12 +210,10 @@ def plot_jerks(robot: Robot, trajectory: Motion, rate: float = 2000.0) -> Figure
 
 
 def plot_torque_rates(robot: Robot, trajectory: Motion, rate: float = 2000.0) -> Figure:
-    """u̇_i(t) of a motion, by central differences (±1e-6 s) of its torques, one panel per joint,
-    with the torque-rate limits ±r_i where the robot has any."""
+    """u̇_i(t) of a motion (:func:`nearopt.verify.torque_rates`: central differences of its
+    torques), one panel per joint, with the torque-rate limits ±r_i where the robot has any."""
     t = np.linspace(0.0, trajectory.duration, max(2, int(trajectory.duration * rate) + 1))
-    ahead = np.minimum(t + 1e-6, trajectory.duration)
-    behind = np.maximum(t - 1e-6, 0.0)
-    rates = (trajectory.torque(ahead) - trajectory.torque(behind)) / (ahead - behind)[:, None]
+    rates = torque_rates(robot, trajectory, t)
     r = robot.limits.torque_rate
     return _joint_panels(
         robot,
