@@ -121,3 +121,24 @@ def test_implied_rows() -> None:
     group = np.flatnonzero(np.diff(start[order], prepend=-1, append=-2))
     implied = implied_rows(order, group, a, h)
     np.testing.assert_array_equal(implied, [True, False, True, False, True, False, False])
+
+
+@pytest.mark.parametrize("seed", [1, 3, 4])
+def test_rows_left_out_far_from_binding_give_the_same_optimum(seed: int) -> None:
+    """A later program of a sequence (its bounds moved by up to 5 %) solved on the rows near
+    binding at the last optimum has the whole program's optimum; so has one screened at a far
+    reference (the start), whose optimum breaks rows that are then put back."""
+    p = _program(seed, True, True)
+    z0 = np.full(N, 0.05)
+    last = solve_banded(p, z0)
+    rng = np.random.default_rng(seed)
+    later = p._replace(r_h=p.r_h * rng.uniform(0.95, 1.05, p.r_h.size))
+    whole = solve_banded(later, z0)
+    assert whole.converged, whole.message
+    for reference, change in ((last.z, 0.01 * (last.z - z0)), (z0, np.zeros(N))):
+        screened = solve_banded(later, z0, reference=reference, change=change)
+        assert screened.converged, screened.message
+        assert f"of {p.r_h.size} rows near binding" in screened.message  # (rows were left out)
+        assert np.max(_c(later, screened.z)) <= 1e-9
+        assert screened.value == pytest.approx(whole.value, rel=1e-8)
+        np.testing.assert_allclose(screened.z, whole.z, rtol=1e-4, atol=1e-6)

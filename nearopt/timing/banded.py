@@ -19,7 +19,11 @@ Each term (u/√v with u a convex quadratic, v linear) is convex, so is each row
   to the boundary of a slack or multiplier, and no ℓ·z below a quarter of its value in one step;
 * F is scaled to 1 at the start; it stops when the duality measure Σ s_j y_j and the gradient of
   the Lagrangian are below ``tolerance`` relative to F, and every row's residual below
-  ``tolerance`` (rows are scaled so that their largest coefficient is 1).
+  ``tolerance`` (rows are scaled so that their largest coefficient is 1);
+* a program of a sequence (the jerk-limited timing's convex restrictions) may leave out the
+  rows far from binding at the last optimum and put back those its optimum breaks
+  (:func:`solve_banded`'s ``reference``): 80–90 % of the rows of a later restriction are
+  slack, and the cost of an iteration is about proportional to the rows.
 
 The loops are compiled by numba (:mod:`nearopt.timing._banded_kernels`, cached beside the source).
 """
@@ -103,8 +107,79 @@ def solve_banded(
     z0: NDArray[np.float64],
     tolerance: float = 1e-9,
     max_iterations: int = 200,
+    reference: NDArray[np.float64] | None = None,
+    change: NDArray[np.float64] | None = None,
 ) -> BandedSolution:
-    """The program's optimum from z0 (every ℓ·z0 > 0)."""
+    """The program's optimum from z0 (every ℓ·z0 > 0).
+
+    With a ``reference`` (the last optimum of a program much like this one) and the ``change``
+    of z that led to it (from the optimum before), the rows far from binding at the reference
+    are left out: those whose slack exceeds :data:`SCREEN` times the change of their value
+    that ``change`` would make (Σ |a_j| |Δz|) plus a share of their bound. The smaller program
+    is solved, and the rows it breaks (c_j > ``tolerance``) are put back with those near
+    binding at its optimum, until it holds every row (at most :data:`ROUNDS` times, then the
+    whole program): an optimum of fewer rows that holds all of them is the program's."""
+    if reference is not None and change is not None:
+        screened = _screened(program, z0, tolerance, max_iterations, reference, change)
+        if screened is not None:
+            return screened
+    return _solve(program, z0, tolerance, max_iterations)
+
+
+SCREEN = 3.0
+ROUNDS = 3
+BOUND_SHARE = 0.05
+
+
+def _screened(
+    p: BandedProgram,
+    z0: NDArray[np.float64],
+    tolerance: float,
+    max_iterations: int,
+    reference: NDArray[np.float64],
+    change: NDArray[np.float64],
+) -> BandedSolution | None:
+    """:func:`solve_banded` on the rows near binding; None where the whole program is needed."""
+    width = p.r_a.shape[1]
+    reach = np.einsum("jw,jw->j", np.abs(p.r_a), np.abs(_gather(change, p.r_start, width)))
+    value, size = _rows_at(p, reference)
+    homogeneous = p.r_h == 0.0  # (orderings of the variables, not limits: always kept)
+    keep = homogeneous | ~(value < -(SCREEN * reach + BOUND_SHARE * size))
+    for _ in range(ROUNDS):
+        if np.all(keep):
+            return None
+        part = p._replace(
+            r_start=p.r_start[keep], r_a=p.r_a[keep], r_e=p.r_e[keep], r_ell=p.r_ell[keep],
+            r_h=p.r_h[keep],
+        )  # fmt: skip
+        solution = _solve(part, z0, tolerance, max_iterations)
+        if not solution.converged:
+            return None
+        value, size = _rows_at(p, solution.z)
+        broken = ~keep & ~(value <= tolerance)
+        if not np.any(broken):
+            message = f"{solution.message}; {int(keep.sum())} of {keep.size} rows near binding"
+            return solution._replace(message=message)
+        keep |= broken | ~(value < -(SCREEN * reach + BOUND_SHARE * size))
+    return None
+
+
+def _rows_at(p: BandedProgram, z: NDArray[np.float64]) -> tuple[NDArray, NDArray]:
+    """Each row's c_j(z) = a_j·z + e_j √(ℓ_j·z) − h_j (NaN where ℓ_j·z < 0) and its size
+    |h_j| + |e_j| √(ℓ_j·z)."""
+    window = _gather(z, p.r_start, p.r_a.shape[1])
+    with np.errstate(invalid="ignore"):
+        root = np.sqrt(np.einsum("jw,jw->j", p.r_ell, window))
+    root = np.where(p.r_e != 0.0, root, 0.0)
+    value = np.einsum("jw,jw->j", p.r_a, window) + p.r_e * root - p.r_h
+    size = np.abs(p.r_h)
+    return value, size + np.abs(p.r_e) * root
+
+
+def _solve(
+    program: BandedProgram, z0: NDArray[np.float64], tolerance: float, max_iterations: int
+) -> BandedSolution:
+    """The kernel on the whole program."""
     from ._banded_kernels import CONVERGED, NOT_FINITE, SINGULAR, iterate
 
     p = program

@@ -333,7 +333,9 @@ def jerk_limited_timing(
             break
         extra = tuple(np.concatenate(pair) for pair in zip(extra, more, strict=True))
         rate_extra = tuple(np.concatenate(pair) for pair in zip(rate_extra, faster, strict=True))
+        last_z = model.last_z
         model = _Model(robot, path, s, jerk, acc, torque, weights, extra, rate, rate_extra)
+        model.last_z = last_z  # (for the banded kernel's screening of rows)
         x = model.within_rates(x[: model.iB[-1] + 1])  # b, m and B keep their places
         bbar = np.maximum(x[model.iB], 1e-300)
         # with new torque-rate points only, the slowed-down x holds every row of the new model:
@@ -381,6 +383,7 @@ def _jerk_tangent(
 
 
 _WIDTH = 5
+_START_SHARE = 0.9  # the banded kernel starts a later program at this share of the last optimum
 """The banded kernel's window: a segment's rows touch its own and its neighbours' m (and its
 B), 5 consecutive variables of z (see :attr:`_Model.reduction`)."""
 
@@ -638,6 +641,7 @@ class _Model:
         self.limits, self.weights = lim, weights
         self.damped = bool(np.any(robot.damping))
         self.tq: _Points | None = None
+        self.last_z: NDArray[np.float64] | None = None  # the banded kernel's last start or optimum
         if torque and np.any(np.isfinite(lim.effort_upper) | np.isfinite(lim.effort_lower)):
             self.tq = self._torque_points(robot, path)
             if self.damped:  # w ≤ √b at every torque point
@@ -1435,7 +1439,13 @@ class _Model:
             unit * (self.reduction.T @ lin),
         )  # fmt: skip
         z0 = self._banded_start(bbar, previous) / unit
-        solution = solve_banded(program, z0, tolerance=1e-9)
+        reference = change = None
+        if previous is not None:  # the last optimum and the step that led to it, for screening
+            reference = self._as_z(previous) / unit
+            if self.last_z is not None:
+                change = reference - self.last_z / unit
+        self.last_z = z0 * unit if reference is None else reference * unit
+        solution = solve_banded(program, z0, tolerance=1e-9, reference=reference, change=change)
         stalled = previous is not None and solution.primal <= 1e-9 and solution.iterations > 0
         if not solution.converged and not (stalled and np.isfinite(solution.value)):
             # (a later program that stalls on its optimality test at a feasible point gives a
@@ -1448,17 +1458,24 @@ class _Model:
     ) -> NDArray[np.float64]:
         """z to start from: 0.9 times the last solution (strictly inside its rows where they
         scale with b), or B̄ for every m and B at first."""
+        if previous is None:
+            z = np.zeros(2 * self.inner.size)
+            z[0::2] = bbar[self.inner]
+            z[1::2] = bbar[self.inner]
+            return z
+        z = self._as_z(previous)
+        return _START_SHARE * np.maximum(z, 1e-12 * float(np.max(bbar)))
+
+    def _as_z(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
+        """The banded kernel's variables of a solution x (in x's units): m_k and B_k of each
+        inner segment, b_1 and b_{N−1} for the first and last m (see :attr:`reduction`)."""
         inner, last = self.inner, self.d.size - 1
         z = np.zeros(2 * inner.size)
-        if previous is None:
-            z[0::2] = bbar[inner]
-            z[1::2] = bbar[inner]
-            return z
-        z[0::2] = previous[self.im[inner]]
-        z[0] = previous[self.ib[1]]
-        z[-2] = previous[self.ib[last]]
-        z[1::2] = previous[self.iB[inner]]
-        return 0.9 * np.maximum(z, 1e-12 * float(np.max(bbar)))
+        z[0::2] = x[self.im[inner]]
+        z[0] = x[self.ib[1]]
+        z[-2] = x[self.ib[last]]
+        z[1::2] = x[self.iB[inner]]
+        return z
 
     def units(self, bbar: NDArray[np.float64]) -> NDArray[np.float64]:
         """Each variable's unit: S = the largest B̄ for b, m and B, √S for the w ≤ √b, 1/√S for
