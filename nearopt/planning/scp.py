@@ -74,6 +74,11 @@ if TYPE_CHECKING:
 
 __all__ = [
     "sequential_convex",
+    "IterateParts",
+    "iterate_model",
+    "new_radius",
+    "solve_model",
+    "trust_scale",
     "collision_rows",
     "CollisionSamples",
     "path_through",
@@ -156,7 +161,7 @@ def sequential_convex(
     start, k_count, breaks = _first_iterate(options, q0, qe, start)
     fixed = start.control_points[[0, -1]]
     iterate_grid = min(grid, max(options.grid, 4 * k_count))  # ≥ 4 segments per control point
-    scale, lower, upper = _trust_scale(robot, q0, qe, k_count, goal is not None, position_limits)
+    scale, lower, upper = trust_scale(robot, q0, qe, k_count, goal is not None, position_limits)
     kept = MovingEnds(*ends, q0, qe, k_count - 1, goal is not None)
 
     def path_of(p: NDArray[np.float64]) -> BSplinePath:
@@ -171,8 +176,8 @@ def sequential_convex(
     evaluations, index, small, failures = 1, 0, 0, 0
     run.report(0, timing, None, start)
     basis, moving = None, p.size // n  # moving: the interior control points (and θe, a pose)
-    parts = _IterateParts(timing, path_of(p))
-    radius = np.full(moving, options.trust_radius)  # per control point (see _new_radius)
+    parts = IterateParts(timing, path_of(p))
+    radius = np.full(moving, options.trust_radius)  # per control point (see new_radius)
     reason, message = StopReason.ITERATION_LIMIT, f"{run.max_iterations} iterations"
     while index < run.max_iterations:
         if run.out_of_time():
@@ -183,13 +188,13 @@ def sequential_convex(
         if basis is None:  # the grid (knots, interior points) is the same for every iterate
             basis = path_basis(timing.trajectory.path, disc, end=goal is not None)
         bound = np.repeat(radius, n) * scale
-        parts = parts if parts.timing is timing else _IterateParts(timing, path_of(p))
-        model = _iterate_model(
+        parts = parts if parts.timing is timing else IterateParts(timing, path_of(p))
+        model = iterate_model(
             robot, disc, z, basis, p, parts, bound, collisions, start, via, goal,
             duration, (kept, weights),
         )  # fmt: skip
         j0 = timing.objective
-        step = _solve_model(disc, weights, model, z, p, bound, lower, upper)
+        step = solve_model(disc, weights, model, z, p, bound, lower, upper)
         if step is None:  # numerical trouble: a smaller step is a better-conditioned model
             failures += 1
             radius = 0.25 * radius
@@ -211,7 +216,7 @@ def sequential_convex(
         gain = -np.inf if trial is None else j0 - trial.objective
         # the step's length per control point, as a fraction of scale
         reach = np.max((np.abs(dp) / scale).reshape(moving, n), axis=1)
-        radius = _new_radius(radius, gain, gain / (j0 - predicted), reach)
+        radius = new_radius(radius, gain, gain / (j0 - predicted), reach)
         if gain > 0.0:
             p, timing, index = p_trial, trial, index + 1
             run.report(index, timing, float(np.max(np.abs(dp))), timing.trajectory.path)
@@ -308,7 +313,7 @@ def _timer(
     return time_it
 
 
-def _new_radius(
+def new_radius(
     radius: NDArray[np.float64],
     gain: float,
     ratio: float,
@@ -327,7 +332,7 @@ def _new_radius(
     return np.minimum(radius, 0.25 * np.max(reach))
 
 
-def _trust_scale(
+def trust_scale(
     robot: Robot,
     q0: NDArray[np.float64],
     qe: NDArray[np.float64],
@@ -369,7 +374,7 @@ def _on_plan_grid(
 
 
 @dataclass
-class _IterateParts:
+class IterateParts:
     """What the convex model takes from the iterate alone, not from the trust region: built
     once per iterate (a rejected step's smaller model takes it again)."""
 
@@ -379,13 +384,13 @@ class _IterateParts:
     samples: CollisionSamples | None = None
 
 
-def _iterate_model(
+def iterate_model(
     robot: Robot,
     disc: Discretisation,
     z: NDArray[np.float64],
     basis: PathBasis,
     p: NDArray[np.float64],
-    parts: _IterateParts,
+    parts: IterateParts,
     reach: NDArray[np.float64],
     collisions: CollisionModel | None,
     start: BSplinePath,
@@ -796,7 +801,7 @@ def _model(
     return _Model(keep, matrix[keep], lower[keep], upper[keep], matrix[torque], const, limits)
 
 
-def _solve_model(
+def solve_model(
     disc: Discretisation,
     weights: NDArray[np.float64],
     model: _Model,
