@@ -248,8 +248,9 @@ def test_damped_arms_and_an_energy_cost(name: str) -> None:
 
 
 def test_a_plan_with_jerk_limits_returns_the_better_path_under_them() -> None:
-    """Stage 2 does not know the jerk limits yet: plan times both its first path and the path
-    it found under them and returns the one of lower J, verified (the jerk included)."""
+    """Stage 2's model does not know the jerk limits: plan times both its first path and the
+    path it found under them and returns the one of lower J (no iterations are left here for
+    stage 2 under the limits, tests/test_smooth.py), verified (the jerk included)."""
     robot = nearopt.Robot.from_name("ur5").with_limits(jerk=30.0)
     q0, qe = np.array([0, -1.5, 1.5, 0, 0, 0.0]), np.array([1.5, -1, 1, 0.5, 0.5, 0.5])
     result = nearopt.plan(robot, q0, qe, nearopt.TimeCost(), max_iterations=4, grid=80)

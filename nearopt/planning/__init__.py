@@ -3,6 +3,7 @@
 ``records`` holds the methods, their options and what a plan returns; ``linearisation`` stage 1's
 rows as functions of the path; ``scp`` the default path update (sequential convex programming);
 ``paper`` the paper's own update (torque gradient, improved torques, boundary-value problem);
+``smooth`` the path improved for its J under jerk (torque-rate) limits, after stage 2;
 ``planner`` the loop of Section 6, :func:`plan`; ``task`` a sequence of targets, :func:`plan_task`.
 """
 
@@ -22,6 +23,7 @@ from .records import (
     StopReason,
 )
 from .scp import sequential_convex
+from .smooth import SmoothOutcome, jerk_rows, smooth_iterations
 from .task import Target, Task, TaskResult, check_plan, plan_task
 
 __all__ = [
@@ -47,6 +49,9 @@ __all__ = [
     "path_basis",
     "row_path_jacobian",
     "sequential_convex",
+    "smooth_iterations",
+    "SmoothOutcome",
+    "jerk_rows",
     "torque_gradient",
     "nominal_motion",
     "boundary_value_path",

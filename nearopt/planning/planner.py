@@ -33,7 +33,7 @@ from ..errors import (
     SolverError,
     UnreachablePoseError,
 )
-from ..path import Path
+from ..path import BSplinePath, Path
 from ..robot import Robot
 from ..robot.kinematics import ToolPose, inverse_kinematics
 from ..timing import (
@@ -59,7 +59,8 @@ from .records import (
     Segment,
     StopReason,
 )
-from .scp import sequential_convex
+from .scp import knot_breaks, sequential_convex
+from .smooth import smooth_iterations
 from .start import first_path, position_bounds, resting_ends
 
 if TYPE_CHECKING:
@@ -662,6 +663,7 @@ def _result(
     jerk = None
     if robot.limits.smooth:
         timing, jerk, message = _under_jerk_limits(setup, timing, initial, message)
+        timing, jerk, message = _smoothed(setup, (timing, jerk, message), history, via_s)
     return PlanResult(
         robot=robot,
         timing=timing,
@@ -723,6 +725,64 @@ def _under_jerk_limits(
                 f"returned, timed under them (te {first.duration:.4g} s){''.join(late[:1])}",
             )
     return timing, found, f"{message}; timed under the {limits}: {note}{''.join(late[:1])}"
+
+
+def _smoothed(
+    setup: Segment,
+    chosen: tuple[TimingResult, JerkTimingResult, str],
+    history: list[Iteration],
+    via_s: tuple[float, ...],
+) -> tuple[TimingResult, JerkTimingResult, str]:
+    """Stage 2 under the jerk (torque-rate) limits (:func:`~nearopt.planning.smooth_iterations`)
+    from the path :func:`_under_jerk_limits` chose, with the plan's remaining iterations and
+    time; its iterates join ``history`` (J and t_e under the limits, on the iterate grid; the
+    first, with α None, is the chosen path, so J rises there where the limits bind). The better
+    of the two paths timed under the limits on the plan's grid: its stage-1 timing, its timing
+    under the limits, the message."""
+    timing, limited, message = chosen
+    left = setup.max_iterations - max(len(history) - 1, 0)
+    if setup.method != Method.SCP or left <= 0 or time.perf_counter() >= setup.deadline:
+        return chosen
+    path, options = timing.trajectory.path, setup.options
+    if not isinstance(path, BSplinePath):  # the straight line
+        k = options.control_points
+        path = BSplinePath.line(setup.q0, setup.qe, k, knot_breaks(options, k))
+    offset = len(history)
+
+    def accept(entry: Iteration, _: TimingResult) -> None:
+        # (its iterate 0, the chosen path under the limits, marks where they begin: α None)
+        history.append(replace(entry, index=entry.index + offset))
+
+    count = path.control_points.shape[0] - 2
+    try:
+        outcome = smooth_iterations(
+            setup.robot, setup.cost, path,
+            grid=min(setup.grid, max(options.grid, 4 * count)),
+            velocity_limits=setup.velocity_limits, position_limits=setup.position_limits,
+            options=options, run=Run(left, setup.deadline, setup.t_start, accept),
+            collisions=setup.collisions, via=via_s,
+        )  # fmt: skip
+        if outcome.iterations == 0:
+            return timing, limited, f"{message}; stage 2 under the limits: {outcome.message}"
+        better = time_with_jerk_limits(
+            setup.robot, outcome.path, setup.cost, grid=setup.grid,
+            velocity_limits=setup.velocity_limits,
+            time_limit=max(setup.deadline - time.perf_counter(), 0.0),
+        )  # fmt: skip
+        if better.J >= limited.J:  # (J on the iterate grid went down, on the plan's not)
+            return timing, limited, f"{message}; stage 2 under the limits found no lower J"
+        plain = optimal_timing(
+            setup.robot, outcome.path, setup.cost, grid=setup.grid,
+            velocity_limits=setup.velocity_limits,
+        )  # fmt: skip
+    except (InfeasiblePathError, SolverError):
+        return chosen
+    return (
+        plain,
+        better,
+        f"{message}; stage 2 under the limits from there: J {limited.J:.6g} -> {better.J:.6g} "
+        f"(te {better.duration:.4g} s) in {outcome.iterations} iterations, {outcome.message}",
+    )
 
 
 def _via_points(

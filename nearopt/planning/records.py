@@ -194,10 +194,13 @@ class Iteration:
     index
         j; 0 is the straight line.
     J
-        Stage 1's optimal cost of the iterate's path on the grid (the discretised J^j).
+        Stage 1's optimal cost of the iterate's path on the grid (the discretised J^j). With
+        jerk or torque-rate limits, the iterates from the second with ``alpha`` None on are
+        stage 2 under those limits (:func:`~nearopt.planning.smooth_iterations`): J (and t_e)
+        under them, its first the path it starts from.
     alpha
         The step that produced it: α of eq. (22) for ``"paper"``; for ``"scp"`` the largest
-        control-point move [rad]. None for j = 0.
+        control-point move [rad]. None for j = 0 (and where stage 2 under jerk limits starts).
     duration
         t_e of the iterate's optimal timing [s].
     wall_time

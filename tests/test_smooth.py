@@ -1,0 +1,95 @@
+"""Stage 2 under jerk limits (nearopt.planning.smooth): the model's jerk rows are the discrete
+jerk's restriction at the knots, exact in b and in the path's control points at the point they
+are built at; a plan continues from the better of its two paths under the limits and lowers J
+below both, every iterate of that phase lower than the one before, verified."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+import nearopt
+from nearopt.planning import jerk_rows
+from nearopt.planning.records import SCPOptions
+from nearopt.planning.scp import knot_breaks
+from nearopt.timing import Discretisation, optimal_timing, time_with_jerk_limits
+
+
+def _discrete_jerk(sigma: np.ndarray, b: np.ndarray, path: nearopt.BSplinePath) -> np.ndarray:
+    """√b (θ‴b + 3θ″a + θ′a′) at the inner knots, a = b′/2 and a′ = b″/2 by the derivatives of
+    the parabola through each knot and its two neighbours (np.polyfit), shape (N − 1, n)."""
+    out = []
+    for k in range(1, sigma.size - 1):
+        c2, c1, _ = np.polyfit(sigma[k - 1 : k + 2] - sigma[k], b[k - 1 : k + 2], 2)
+        a, da = 0.5 * c1, c2  # b′ = c1, b″ = 2 c2 at the knot
+        d1, d2, d3 = (path(sigma[k : k + 1], order)[0] for order in (1, 2, 3))
+        out.append(np.sqrt(b[k]) * (d3 * b[k] + 3.0 * d2 * a + d1 * da))
+    return np.array(out)
+
+
+@pytest.mark.parametrize("name", ["ur5", "two_link"])
+def test_the_jerk_rows_are_the_discrete_jerk_and_a_restriction_of_it(name: str) -> None:
+    robot = nearopt.Robot.from_name(name)
+    rng = np.random.default_rng(3)
+    q0 = 0.5 * rng.uniform(robot.limits.position_lower, robot.limits.position_upper) / np.pi
+    qe = q0 + rng.uniform(-1.0, 1.0, robot.n)
+    options = SCPOptions()
+    k = options.control_points
+    line = nearopt.BSplinePath.line(q0, qe, k, knot_breaks(options, k))
+    disc = Discretisation.of(optimal_timing(robot, line, grid=40).problem)
+    sigma = disc.problem.sigma
+    b_bar = time_with_jerk_limits(robot.with_limits(jerk=100.0), line, nearopt.TimeCost()).timing
+    b_bar = b_bar.evaluate(sigma)[0]
+    jerk = np.linspace(50.0, 150.0, robot.n)
+    matrix, lower, upper = jerk_rows(disc, line, b_bar, jerk)
+    assert np.all(lower == -np.inf)
+    rows = np.arange(1, sigma.size - 1)
+    keep = b_bar[rows] > 0
+    # at b = b̄ with the control points moved, each row is (±√b̄ L − j)/(1.5 j) with L the
+    # moved path's: L is linear in the control points, so the rows' path part is exact there
+    step = 0.05 * rng.normal(size=(k, robot.n))
+    moved = nearopt.BSplinePath(
+        np.vstack([q0, line.control_points[1:-1] + step, qe]), line.knots[4:-4]
+    )
+    x = np.concatenate([b_bar[1:-1], step.ravel()])
+    value = (matrix @ x - upper).reshape(2, -1, robot.n)
+    expected = _discrete_jerk(sigma, b_bar, moved)[keep]
+    np.testing.assert_allclose(value[0], (expected - jerk) / (1.5 * jerk), atol=1e-9)
+    np.testing.assert_allclose(value[1], (-expected - jerk) / (1.5 * jerk), atol=1e-9)
+    # for another b, rows that hold keep the discrete jerk within its limits (the tangent of
+    # the convex j/√b lies below it)
+    held = 0
+    for _ in range(20):
+        b = b_bar * rng.uniform(0.5, 2.0, b_bar.size)
+        b[[0, -1]] = b_bar[[0, -1]]
+        x = np.concatenate([b[1:-1], np.zeros(k * robot.n)])
+        hold = (matrix @ x <= upper).reshape(2, -1, robot.n).all(axis=0)
+        jerk_at = np.abs(_discrete_jerk(sigma, b, line)[keep])
+        assert np.all(jerk_at[hold] <= jerk[np.nonzero(hold)[1]] * (1 + 1e-9))
+        held += int(hold.sum())
+    assert held > 0  # (the check compared something)
+
+
+def test_a_plan_under_jerk_limits_goes_on_under_them() -> None:
+    """ur5 at 300 rad/s³ (f0 = 1 + 1e-3 Σu²): stage 2 without the limit finds a path better
+    than the line under them too; stage 2 under the limits, from there, lowers J further, every
+    accepted iterate below the one before; the plan is verified (the jerk at every sample)."""
+    free = nearopt.Robot.from_name("ur5")
+    rng = np.random.default_rng(0)
+    lo, hi = np.maximum(free.limits.position_lower, -3), np.minimum(free.limits.position_upper, 3)
+    q0, qe = (0.5 * (lo + hi) + 0.2 * (hi - lo) * rng.uniform(-1, 1, 6) for _ in range(2))
+    cost = nearopt.TorqueCost(1e-3)
+    robot = free.with_limits(jerk=300.0)
+    found = nearopt.plan(free, q0, qe, cost)
+    result = nearopt.plan(robot, q0, qe, cost)
+    line = nearopt.plan(robot, q0, qe, cost, max_iterations=0)
+    before = min(line.J, time_with_jerk_limits(robot, found.trajectory.path, cost).J)
+    assert result.J < 0.97 * before, result.message
+    assert "stage 2 under the limits from there" in result.message
+    starts = [i for i, it in enumerate(result.history) if it.alpha is None]
+    assert len(starts) == 2  # the first path, and where the phase under the limits begins
+    phase = [it.J for it in result.history[starts[1] :]]
+    assert len(phase) > 1 and np.all(np.diff(phase) < 0.0)
+    report = nearopt.verify_plan(result)
+    assert report.passed, report
+    assert "joint jerk limits" in {c.name for c in report.checks}
