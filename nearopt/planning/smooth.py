@@ -1,22 +1,25 @@
-"""Stage 2 under jerk (and torque-rate) limits: the path improved for its jerk-limited J.
+"""Stage 2 under jerk (and torque-rate) limits: the path improved for its J under them.
 
 Stage 2's convex model (:mod:`nearopt.planning.scp`) knows stage 1's rows, not the jerk: its
 timing is piecewise linear in b, so θ̈ jumps and θ⃛ is not defined. Under jerk limits the path
 it finds is often worse than the straight line (θ‴ = 0 only on a line; a bent path adds θ‴b^{3/2}
 to the jerk). :func:`smooth_iterations` continues from a path (the better of the path found and
 the first path, timed under the limits) with the same model and, per knot k of the iterate grid
-and joint i, the jerk θ⃛_i = √b (θ‴_i b + 3θ″_i a + θ′_i a′) with a = b′/2 and a′ = b″/2 by
-three-point differences of the knots' b — bilinear in (b, θ), linearised at the iterate (its
-path, and b of its jerk-limited timing at the knots):
+and joint i, the jerk θ⃛_i = √b L_i, L_i = θ‴_i b + 3θ″_i a + θ′_i a′, with a = b′/2 and
+a′ = b″/2 by three-point differences of the knots' b (:func:`jerk_rows`). |√b L| ≤ j is held
+as ±L ≤ j/√b, whose right-hand side is convex in b, by its tangent at the iterate's b̄ (its
+jerk-limited timing at the knots) — a restriction, as in stage 1's jerk-limited timing:
 
-    |θ⃛_i⁰ + Σ_m ∂θ⃛_i/∂b_m (b_m − b_m⁰) + Σ_j ∂θ⃛_i/∂c_j Δc_j| ≤ j_i,   m = k − 1, k, k + 1,
+    ±(L_i(b) + Σ_j ∂L_i/∂c_j Δc_j) + ½ j_i b̄^{−3/2} b_k ≤ (3/2) j_i / √b̄,
 
-with ∂θ⃛/∂c_j = √b a′ B′_j + 3√b a B″_j + √b b B‴_j (B_j the B-spline's basis). The model's
-optimum is a direction, not a timing: every trial path is timed exactly under every limit
+L exact in b (linear in it for a fixed path) and linearised in the control points at b̄
+(∂L/∂c_j = a′B′_j + 3a B″_j + b B‴_j, B_j the B-spline's basis). The model's optimum is a
+direction, not a timing: every trial path is timed exactly under every limit
 (:func:`~nearopt.timing.time_with_jerk_limits`, on the iterate grid) and accepted where its J is
 lower; the trust region follows the ratio of that gain to the model's own (its optimum against
 its value with the path held). Every accepted iterate is therefore a path timed under the
-limits, its J below the one before.
+limits, its J below the one before. Torque-rate limits have no rows here: their trials are
+timed under them.
 """
 
 from __future__ import annotations
