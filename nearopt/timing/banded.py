@@ -211,8 +211,9 @@ def _solve(
 
 
 def _gather(z: NDArray, start: NDArray, width: int) -> NDArray:
-    index = np.minimum(start[:, None] + np.arange(width)[None, :], z.size - 1)
-    return z[index]
+    """z[start_j : start_j + width] per row, shape (rows, width) (past the end: z's last)."""
+    padded = np.concatenate([z, np.full(width - 1, z[-1])])
+    return np.lib.stride_tricks.sliding_window_view(padded, width)[start]
 
 
 def _value(p: BandedProgram, z: NDArray) -> float:
