@@ -660,6 +660,8 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
         )
     scene = Scene.from_file(request.scene) if request.scene is not None else None
     via = [_joint_values(v, request.deg) for v in request.via]
+    if request.deg:  # said in the request's units (the planner would say rad)
+        _check_in_degrees(robot, request, q0, qe, via)
     whole = (robot.n,)
     if isinstance(qe, np.ndarray) and qe.shape == whole and q0.shape == whole:  # too slow: now
         shortest = minimum_duration(robot, q0, qe, not request.no_velocity_limits)[0]
@@ -669,6 +671,45 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
 
 def _joint_values(values: tuple[float, ...], deg: bool) -> NDArray[np.float64]:
     return np.deg2rad(values) if deg else np.asarray(values, dtype=float)
+
+
+def _check_in_degrees(
+    robot: Robot,
+    request: PlanRequest,
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64] | ToolPose | None,
+    via: list[NDArray[np.float64]],
+) -> None:
+    """A ``--deg`` request's configurations within the position limits and its boundary
+    velocities within the speed limits (where those hold), as the planner checks them, but a
+    ConfigurationError in degrees (deg, deg/s) naming the joint."""
+    lim, names = robot.limits, robot.joint_names
+    if not request.no_position_limits:
+        points = [("q0", q0), *((f"via[{k}]", v) for k, v in enumerate(via))]
+        if isinstance(qe, np.ndarray):
+            points.append(("qe", qe))
+        for what, q in points:
+            outside = ~((lim.position_lower <= q) & (q <= lim.position_upper))
+            if q.shape == (robot.n,) and np.any(outside):
+                i = int(np.argmax(outside))
+                low, high = np.rad2deg([lim.position_lower[i], lim.position_upper[i]])
+                raise ConfigurationError(
+                    f"{what}[{i}] = {np.rad2deg(q[i]):.6g} deg is outside the position limits "
+                    f"[{low:.6g}, {high:.6g}] deg of joint {names[i]!r}",
+                    joint=names[i],
+                )
+    for what, given in (("qd0", request.qd0), ("qde", request.qde)):
+        if given is None or request.no_velocity_limits or len(given) != robot.n:
+            continue
+        v = np.asarray(given, dtype=float)
+        over = np.abs(np.deg2rad(v)) - lim.velocity * (1.0 + 1e-12)
+        if np.any(over > 0.0):
+            i = int(np.argmax(over))
+            raise ConfigurationError(
+                f"{what} of joint {names[i]!r} is {v[i]:.6g} deg/s, beyond its speed limit "
+                f"{np.rad2deg(lim.velocity[i]):.6g} deg/s",
+                joint=names[i],
+            )
 
 
 def solve(
