@@ -51,6 +51,7 @@ def urdf(tmp_path: Path, text: str, name: str = "bad.urdf") -> Path:
 
 
 ONE_RAD = ["--robot", "two_link", "--q0", "0", "0", "--qe", "1", "1"]  # a motion of 1 rad
+UR5_DEG = ["--robot", "ur5", "--deg", "--qe", *"30 -100 110 -30 -50 -40".split()]
 START3 = "start = [0.1, 0.2, 0.3]\n[[target]]\nq = [0.2, -0.3]\n"
 FAR_BOX = '[[obstacle]]\nname = "box"\nbox = [0.1, 0.1, 0.1]\nposition = [5.0, 5.0, 5.0]\n'
 
@@ -1111,55 +1112,18 @@ CASES = {
     ),
     "--deg: q0 beyond a position limit, said in degrees": Case(
         None,
-        lambda p: [
-            "--robot",
-            "ur5",
-            "--deg",
-            "--q0",
-            "10",
-            "-60",
-            "200",
-            "-90",
-            "-80",
-            "10",
-            "--qe",
-            "30",
-            "-100",
-            "110",
-            "-30",
-            "-50",
-            "-40",
-        ],
+        lambda p: [*UR5_DEG, "--q0", *"10 -60 200 -90 -80 10".split()],
         ConfigurationError,
         "q0[2] = 200 deg is outside the position limits [-180, 180] deg of joint 'elbow_joint'",
     ),
     "--deg: qd0 beyond a speed limit, said in deg/s": Case(
         None,
         lambda p: [
-            "--robot",
-            "ur5",
-            "--deg",
+            *UR5_DEG,
             "--q0",
-            "10",
-            "-60",
-            "80",
-            "-90",
-            "-80",
-            "10",
-            "--qe",
-            "30",
-            "-100",
-            "110",
-            "-30",
-            "-50",
-            "-40",
+            *"10 -60 80 -90 -80 10".split(),
             "--qd0",
-            "0",
-            "0",
-            "0",
-            "0",
-            "0",
-            "-400",
+            *"0 0 0 0 0 -400".split(),
         ],
         ConfigurationError,
         "qd0 of joint 'wrist_3_joint' is -400 deg/s, beyond its speed limit 183.346 deg/s",
