@@ -165,13 +165,17 @@ def smooth_iterations(
     def path_of(p: NDArray[np.float64]) -> BSplinePath:
         return BSplinePath(np.vstack([fixed[:1], p.reshape(count, n), fixed[1:]]), breaks)
 
-    def judge(p: NDArray[np.float64]) -> _Judged:
-        path = path_of(p)
+    def timed(p: NDArray[np.float64]) -> JerkTimingResult:
+        """The path's timing under every limit (its J)."""
         left = max(run.deadline - time.perf_counter(), 0.0)
-        plain = optimal_timing(robot, path, cost, grid=grid, velocity_limits=velocity_limits)
-        limited = time_with_jerk_limits(
-            robot, path, cost, grid=grid, velocity_limits=velocity_limits, time_limit=left
+        return time_with_jerk_limits(
+            robot, path_of(p), cost, grid=grid, velocity_limits=velocity_limits, time_limit=left
         )
+
+    def judged(p: NDArray[np.float64], limited: JerkTimingResult) -> _Judged:
+        """The iterate: with its stage-1 timing, the model's (only for an accepted one)."""
+        path = path_of(p)
+        plain = optimal_timing(robot, path, cost, grid=grid, velocity_limits=velocity_limits)
         return _Judged(p, IterateParts(plain, path), limited)
 
     def report(index: int, now: _Judged, step: float | None) -> None:
@@ -181,16 +185,18 @@ def smooth_iterations(
         )  # fmt: skip
         run.accept(entry, now.parts.timing)
 
-    now = judge(start.control_points[1:-1].ravel())
+    p0 = start.control_points[1:-1].ravel()
+    now = judged(p0, timed(p0))
     report(0, now, None)
     radius = np.full(count, options.trust_radius)
     index, small, failures, message = 0, 0, 0, f"{run.max_iterations} iterations"
     context = (robot, weights, scale, (lower, upper), collisions, start, via)
+    held: float | None = None  # the model's J with the path held, once per iterate
     while index < run.max_iterations:
         if run.out_of_time():
             message = "the time limit was reached"
             break
-        step = _model_step(now, radius, context)
+        step = _model_step(now, radius, context, held)
         if step is None:  # numerical trouble: a smaller step is a better-conditioned model
             failures += 1
             radius = 0.25 * radius
@@ -198,17 +204,17 @@ def smooth_iterations(
                 continue
             message = "the convex model could not be solved"
             break
-        failures, (dp, promised) = 0, step
-        j0 = now.limited.J
+        failures, (dp, predicted, held) = 0, step
+        j0, promised = now.limited.J, held - predicted
         if promised <= options.tolerance * abs(j0):
             message = _GAINS_NOTHING.format(options.tolerance)
             break
-        trial = _trial(judge, path_of, now.p + dp, collisions)
+        trial = _trial(timed, judged, path_of, now.p + dp, (j0, collisions))
         gain = -np.inf if trial is None else j0 - trial.limited.J
         reach = np.max((np.abs(dp) / scale).reshape(count, n), axis=1)
         radius = new_radius(radius, gain, gain / promised, reach)
         if gain > 0.0:
-            now, index = trial, index + 1
+            now, index, held = trial, index + 1, None
             report(index, now, float(np.max(np.abs(dp))))
             small = small + 1 if gain < options.tolerance * abs(j0) else 0
             if small == 3:
@@ -236,10 +242,10 @@ class _Judged:
 
 
 def _model_step(
-    now: _Judged, radius: NDArray[np.float64], context: tuple
-) -> tuple[NDArray[np.float64], float] | None:
-    """The model's best step Δp within the trust radius and its gain over the model with the
-    path held (its J there less its optimum); None where the model cannot be solved."""
+    now: _Judged, radius: NDArray[np.float64], context: tuple, held: float | None
+) -> tuple[NDArray[np.float64], float, float] | None:
+    """The model's best step Δp within the trust radius, its J there and its J with the path
+    held (``held``, computed where None); None where the model cannot be solved."""
     robot, weights, scale, bounds, collisions, start, via = context
     timing, path = now.parts.timing, now.parts.path
     disc = Discretisation.of(timing.problem)
@@ -261,23 +267,31 @@ def _model_step(
         )
         return solve_model(disc, weights, model, z, now.p, bound, *bounds)
 
-    held = solved(np.full(radius.size, HELD))
-    moved = None if held is None else solved(radius)
+    if held is None:
+        still = solved(np.full(radius.size, HELD))
+        if still is None:
+            return None
+        held = still[1]
+    moved = solved(radius)
     if moved is None:
         return None
-    return moved[0], held[1] - moved[1]
+    return moved[0], moved[1], held
 
 
 def _trial(
-    judge: Callable[[NDArray[np.float64]], _Judged],
+    timed: Callable[[NDArray[np.float64]], JerkTimingResult],
+    judged: Callable[[NDArray[np.float64], JerkTimingResult], _Judged],
     path_of: Callable[[NDArray[np.float64]], BSplinePath],
     p: NDArray[np.float64],
-    collisions: CollisionModel | None,
+    against: tuple[float, CollisionModel | None],
 ) -> _Judged | None:
-    """The trial iterate judged, or None where it is not certified clear or cannot be timed."""
+    """The trial iterate where it is certified clear, timed under the limits and of J below
+    ``against[0]`` (only then its stage-1 timing too); None otherwise."""
+    j0, collisions = against
     if collisions is not None and not collisions.path_clearance(path_of(p)).certified:
         return None
     try:
-        return judge(p)
+        limited = timed(p)
+        return judged(p, limited) if limited.J < j0 else None
     except (InfeasiblePathError, SolverError, ConfigurationError):
         return None
