@@ -223,6 +223,17 @@ class BSplinePath:
         t = cls.knot_vector(count, breaks)
         return np.array([t[j + 1 : j + cls.degree + 1].mean() for j in range(count)])
 
+    def refined(self) -> BSplinePath:
+        """The same curve with a knot inserted in the middle of every other span, the first
+        included (Boehm's knot insertion, SciPy's ``BSpline.insert_knot``): about 1.5 times the
+        control points, every derivative unchanged."""
+        spans = np.unique(self.knots)
+        middles = 0.5 * (spans[:-1] + spans[1:])[::2]
+        spline = self._spline
+        for x in middles:
+            spline = spline.insert_knot(float(x))
+        return BSplinePath(spline.c, spline.t[self.degree + 1 : -(self.degree + 1)])
+
     def basis(self, s: ArrayLike, order: Order = 0) -> NDArray[np.float64]:
         """∂θ^(order)(s) / ∂c_j, the basis functions' values, shape (len(s), K + 2)."""
         s = np.atleast_1d(np.asarray(s, dtype=float))

@@ -233,6 +233,9 @@ def test_plan_rejects_bad_requests() -> None:
         nearopt.plan(robot, THETA_0, THETA_E, options=nearopt.SCPOptions(control_points=1))
     with pytest.raises(nearopt.ConfigurationError, match="zero-length"):
         nearopt.plan(robot, THETA_0, THETA_0)
+    for bad in (-1, 1.5, True, 4):
+        with pytest.raises(nearopt.ConfigurationError, match="refinements must be an integer"):
+            nearopt.plan(robot, THETA_0, THETA_E, options=nearopt.SCPOptions(refinements=bad))
     narrow = robot.with_limits(position=([-1.0, -1.0], [1.0, 1.0]))
     with pytest.raises(nearopt.ConfigurationError, match="joint2"):
         nearopt.plan(narrow, [0.0, 0.0], [0.5, -1.5])
@@ -252,3 +255,31 @@ def test_many_control_points_do_not_stall_on_a_coarse_iterate_grid() -> None:
     few = nearopt.plan(robot, q0, qe, cost, options=nearopt.SCPOptions(control_points=16))
     assert few.J < 0.95 * few.initial.J  # 11 % lower than the line
     assert many.J <= 1.001 * few.J, (many.J, few.J)
+
+
+def test_a_refined_path_is_the_same_curve_with_half_again_the_control_points() -> None:
+    rng = np.random.default_rng(2)
+    path = nearopt.BSplinePath(rng.normal(size=(18, 3)), np.sort(rng.uniform(0, 1, 14)))
+    fine = path.refined()
+    spans = np.unique(path.knots).size - 1  # 15
+    assert fine.control_points.shape == (18 + (spans + 1) // 2, 3)
+    s = np.linspace(0.0, 1.0, 997)
+    for order in (0, 1, 2, 3):
+        np.testing.assert_allclose(fine(s, order), path(s, order), atol=1e-9 * 10**order)
+
+
+@pytest.mark.parametrize("name", ["ur5", "panda"])
+def test_the_refined_run_lowers_j(name: str) -> None:
+    """After stage 2 converges on 16 control points it goes on from the same curve on 24 (the
+    default): J no higher, and lower on these seeded motions (0.07–0.28 % measured)."""
+    robot = load(name)
+    rng = np.random.default_rng(4)
+    lo, hi = np.maximum(robot.limits.position_lower, -3), np.minimum(robot.limits.position_upper, 3)
+    q0, qe = (0.5 * (lo + hi) + 0.2 * (hi - lo) * rng.uniform(-1, 1, robot.n) for _ in range(2))
+    cost = nearopt.TorqueCost(1e-3)
+    coarse = nearopt.plan(robot, q0, qe, cost, options=nearopt.SCPOptions(refinements=0))
+    fine = nearopt.plan(robot, q0, qe, cost)
+    assert "refined to 24 control points" in fine.message
+    assert fine.J < coarse.J * (1 - 1e-4), (fine.J, coarse.J)
+    assert fine.trajectory.path.control_points.shape[0] == 26
+    assert nearopt.verify_plan(fine).passed

@@ -623,12 +623,15 @@ def _improve(
                     duration=setup.duration,
                     ends=setup.ends,
                 )
-                if goal is not None and optimise_goal and len(history) <= max_iterations:
+                free = goal if goal is not None and optimise_goal else None
+                if free is not None and len(history) <= max_iterations:
                     # then θe moves along the pose, from that plan: J can only go down
-                    outcome = _free_goal(
-                        robot, q0, qe, cost, goal, outcome, common, history, collisions, via_s,
-                        setup.duration, setup.ends,
+                    outcome = _continued(
+                        robot, q0, qe, cost, free, outcome, outcome.timing.trajectory.path,
+                        common, history, collisions, via_s, setup.duration, setup.ends,
                     )  # fmt: skip
+                for _ in range(options.refinements):
+                    outcome = _refined(setup, outcome, free, common, history, via_s)
             else:
                 outcome = paper_iterations(robot, initial, cost, **common)
             timing, reason = outcome.timing, outcome.reason
@@ -844,13 +847,47 @@ def _clear_solution(
     return qe
 
 
-def _free_goal(
+def _refined(
+    setup: Segment,
+    first: MethodOutcome,
+    goal: ToolPose | None,
+    common: dict[str, object],
+    history: list[Iteration],
+    via: tuple[float, ...],
+) -> MethodOutcome:
+    """Stage 2 continued from ``first``'s path with a knot in the middle of every other span
+    (the same path, about 1.5 times the control points; ``SCPOptions.refinements``), where it
+    converged and the iterations, the time and :data:`MAX_CONTROL_POINTS` allow."""
+    path = first.timing.trajectory.path
+    if (
+        first.reason is not StopReason.CONVERGED
+        or not isinstance(path, BSplinePath)
+        or len(history) > setup.max_iterations
+        or time.perf_counter() >= setup.deadline
+    ):
+        return first
+    fine = path.refined()
+    count = fine.control_points.shape[0] - 2
+    if count > MAX_CONTROL_POINTS:
+        return first
+    second = _continued(
+        setup.robot, setup.q0, setup.qe, setup.cost, goal, first, fine, common, history,
+        setup.collisions, via, setup.duration, setup.ends,
+    )  # fmt: skip
+    if second is first:
+        return first
+    note = f"{second.message} (the path refined to {count} control points)"
+    return replace(second, message=note)
+
+
+def _continued(
     robot: Robot,
     q0: NDArray[np.float64],
     qe: NDArray[np.float64],
     cost: Cost,
-    goal: ToolPose,
+    goal: ToolPose | None,
     first: MethodOutcome,
+    start: BSplinePath,
     common: dict[str, object],
     history: list[Iteration],
     collisions: CollisionModel | None,
@@ -858,8 +895,10 @@ def _free_goal(
     duration: tuple[float, bool] | None = None,
     ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None] = (None, None),
 ) -> MethodOutcome:
-    """Stage 2 continued from ``first`` with θe free along the goal pose; its iterates follow
-    the first run's in the history (its iterate 0, the same path, is not repeated)."""
+    """Stage 2 continued after ``first`` from ``start`` (its path, or the same curve with more
+    control points), with θe free along the goal pose ``goal`` (None: θe as ``start`` ends);
+    its iterates follow the first run's in the history (its iterate 0, the same path, is not
+    repeated). The first run's outcome where the second ends higher."""
     run: Run = common["run"]  # type: ignore[assignment]
     offset = len(history) - 1
 
@@ -877,7 +916,7 @@ def _free_goal(
         cost,
         **options,
         collisions=collisions,
-        start=first.timing.trajectory.path,
+        start=start,
         goal=goal,
         via=via,
         duration=duration,
@@ -954,6 +993,13 @@ def _check_method(
             value = getattr(options, name)
             if not (np.isfinite(value) and value > 0):
                 raise ConfigurationError(f"{name} must be a positive number, got {value}")
+        refinements = options.refinements
+        if isinstance(refinements, bool) or not (
+            isinstance(refinements, int | np.integer) and 0 <= refinements <= 3
+        ):
+            raise ConfigurationError(
+                f"refinements must be an integer from 0 to 3, got {refinements!r}"
+            )
     else:
         for name in ("gamma", "alpha", "delta_t", "tolerance"):
             value = getattr(options, name)

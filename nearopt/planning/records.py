@@ -100,6 +100,12 @@ class SCPOptions:
     tolerance
         Stop when the convex model predicts a relative decrease of J below this, or J changed by
         less than this in each of the last 3 iterations.
+    refinements
+        After stage 2 stops (converged), the path's knots are refined this many times — a knot
+        in the middle of every other span, the path itself unchanged (knot insertion), K → about
+        1.5 K — and stage 2 goes on from it: the path's resolution, not the method, is most of
+        what is left to an independent optimum (0.07–0.3 % lower J on ur5 and panda for 15–30 %
+        more time). 0 keeps K.
     """
 
     control_points: int = 16
@@ -108,6 +114,7 @@ class SCPOptions:
     trust_radius: float = 1.0
     min_trust_radius: float = 1e-6
     tolerance: float = 1e-4
+    refinements: int = 1
 
 
 @dataclass(frozen=True)

@@ -1146,7 +1146,7 @@ class _Model:
             np.minimum.at(bbar, self.rp.seg, np.maximum(np.min(caps, axis=1), 1e-300))
         # and the speed limits' (else, with no jerk limit, B̄ = 1e6 sets the solver's units far
         # from b: kinova's b ~ 1e-4 came out at 1e-10 of them)
-        with np.errstate(divide="ignore"):
+        with np.errstate(divide="ignore", over="ignore"):  # (a joint that does not move: inf)
             speed = np.min((self.limits.velocity / np.maximum(self.slope_peak, 1e-300)) ** 2, 1)
         bbar[self.inner] = np.minimum(bbar[self.inner], np.maximum(speed, 1e-300))
         return bbar
