@@ -306,8 +306,8 @@ def _planner_options(p: argparse.ArgumentParser) -> None:
         type=float,
         metavar="J",
         help="joint jerk limits |qddd| <= J [rad/s³], one value or one per joint (default: the "
-        "URDF's or --joint-limits'; else none): the path found is timed under them, C¹ with "
-        "qdd = 0 at rest",
+        "URDF's or --joint-limits'; else none): the better of the first path and the path "
+        "found, timed under them, is improved under them (C¹, qdd = 0 at rest)",
     )
     p.add_argument(
         "--torque-rate-limit",
@@ -315,7 +315,8 @@ def _planner_options(p: argparse.ArgumentParser) -> None:
         type=float,
         metavar="R",
         help="actuator torque-rate limits |du/dt| <= R [N·m/s], one value or one per joint "
-        "(default: none): the path found is timed under them, C¹ with qdd = 0 at rest",
+        "(default: none): the better of the first path and the path found, timed under "
+        "them, is improved under them (C¹, qdd = 0 at rest)",
     )
     p.add_argument(
         "--joint-limits",

@@ -93,3 +93,59 @@ def test_a_plan_under_jerk_limits_goes_on_under_them() -> None:
     report = nearopt.verify_plan(result)
     assert report.passed, report
     assert "joint jerk limits" in {c.name for c in report.checks}
+
+
+def _ur5_case() -> tuple[nearopt.Robot, np.ndarray, np.ndarray, nearopt.TorqueCost]:
+    free = nearopt.Robot.from_name("ur5")
+    rng = np.random.default_rng(0)
+    lo, hi = np.maximum(free.limits.position_lower, -3), np.minimum(free.limits.position_upper, 3)
+    q0, qe = (0.5 * (lo + hi) + 0.2 * (hi - lo) * rng.uniform(-1, 1, 6) for _ in range(2))
+    return free.with_limits(jerk=300.0), q0, qe, nearopt.TorqueCost(1e-3)
+
+
+def test_the_phase_under_the_limits_reports_stops_and_can_be_interrupted() -> None:
+    """Its iterates reach the callback like stage 2's; Ctrl-C in it ends the plan with its best
+    iterate (status interrupted, verified); Ctrl-C in stage 2 ends planning there (no phase);
+    with too few iterations for it the status says the iteration limit."""
+    robot, q0, qe, cost = _ur5_case()
+    seen: list[nearopt.Iteration] = []
+    whole = nearopt.plan(robot, q0, qe, cost, callback=seen.append)
+    assert [it.index for it in seen] == [it.index for it in whole.history]
+    begins = [it.index for it in whole.history if it.alpha is None][1]
+
+    def stop_at(index: int):
+        def callback(entry: nearopt.Iteration) -> None:
+            if entry.index == index:
+                raise KeyboardInterrupt
+
+        return callback
+
+    late = nearopt.plan(robot, q0, qe, cost, callback=stop_at(begins + 2))
+    assert late.status == nearopt.StopReason.INTERRUPTED
+    assert late.history[-1].index == begins + 2
+    assert late.J < whole.history[begins].J  # (the phase's second iterate, timed on the grid)
+    assert nearopt.verify_plan(late).passed
+    early = nearopt.plan(robot, q0, qe, cost, callback=stop_at(3))
+    assert early.status == nearopt.StopReason.INTERRUPTED
+    assert "stage 2 under the limits" not in early.message
+    assert [it.alpha for it in early.history].count(None) == 1
+    short = nearopt.plan(robot, q0, qe, cost, max_iterations=begins)  # one iteration left
+    assert short.status == nearopt.StopReason.ITERATION_LIMIT, short.message
+    assert "iteration limit (1)" in short.message
+
+
+def test_a_jerk_limit_far_below_the_path_s_needs_is_said_or_planned_on_the_first_path() -> None:
+    """At 1e-9 rad/s³ the jerk-limited timing of stage 2's path came out NaN (a plan then
+    failed on 'sample 0 … is nan'): it is a SolverError saying so, and the plan returns the
+    straight line timed under the limit (4257 s)."""
+    ur5 = nearopt.Robot.from_name("ur5")
+    q0 = np.array([0.028372, 1.081113, -0.854017, 1.076759, -0.451605, -0.184017])
+    qe = np.array([0.786486, -0.217922, 0.119025, -1.133858, 0.608431, 0.091544])
+    cost = nearopt.TorqueCost(1e-3)
+    tiny = ur5.with_limits(jerk=1e-9)
+    found = nearopt.plan(ur5, q0, qe, cost).trajectory.path
+    with pytest.raises(nearopt.SolverError, match="not finite"):
+        time_with_jerk_limits(tiny, found, cost)
+    result = nearopt.plan(tiny, q0, qe, cost, max_iterations=40)
+    assert np.isfinite(result.J) and result.duration > 1000.0
+    assert "the first path is returned" in result.message

@@ -234,7 +234,20 @@ def plan(
         setup = replace(setup, ends=_check_ends(setup, qd0, qde))
     initial, outcome, via_s = _planned(setup, callback, verbose)
     timing, reason, message, evaluations, history = outcome
-    return _result(setup, timing, initial, history, reason, message, evaluations, via_s)
+    if setup.robot.limits.smooth:  # stage 2 goes on under the jerk (torque-rate) limits
+
+        def report(entry: Iteration) -> None:
+            history.append(entry)
+            if verbose:
+                print(_format(entry), flush=True)
+            if callback is not None:
+                callback(entry)
+
+        smooth = _under_jerk_limits(setup, timing, initial, message)
+        stage_2 = (reason, len(history))
+        timing, jerk, message, reason = _smoothed(setup, smooth, report, stage_2, via_s)
+        return _result(setup, timing, initial, history, (reason, message), evaluations, via_s, jerk)
+    return _result(setup, timing, initial, history, (reason, message), evaluations, via_s)
 
 
 def _planned(
@@ -630,7 +643,9 @@ def _improve(
                         robot, q0, qe, cost, free, outcome, outcome.timing.trajectory.path,
                         common, history, collisions, via_s, setup.duration, setup.ends,
                     )  # fmt: skip
-                for _ in range(options.refinements):
+                # (not under jerk limits: a finer path found without them was worse under them,
+                # +2–4 % J in cells and on kinova; stage 2 under the limits goes on instead)
+                for _ in range(0 if robot.limits.smooth else options.refinements):
                     outcome = _refined(setup, outcome, free, common, history, via_s)
             else:
                 outcome = paper_iterations(robot, initial, cost, **common)
@@ -655,18 +670,15 @@ def _result(
     timing: TimingResult,
     initial: TimingResult,
     history: list[Iteration],
-    reason: StopReason,
-    message: str,
+    ended: tuple[StopReason, str],
     evaluations: int,
     via_s: tuple[float, ...],
+    jerk: JerkTimingResult | None = None,
 ) -> PlanResult:
     """The plan, its clearance certified when collisions are checked."""
     robot, collisions, goal, vias = setup.robot, setup.collisions, setup.goal, setup.vias
     method, t_start = setup.method, setup.t_start
-    jerk = None
-    if robot.limits.smooth:
-        timing, jerk, message = _under_jerk_limits(setup, timing, initial, message)
-        timing, jerk, message = _smoothed(setup, (timing, jerk, message), history, via_s)
+    reason, message = ended
     return PlanResult(
         robot=robot,
         timing=timing,
@@ -715,9 +727,18 @@ def _under_jerk_limits(
             late.append(f"; the timing under the {limits} stopped at the plan's time limit")
         return result
 
-    found = timed(timing.trajectory.path)
-    note = f"J {timing.J:.6g} -> {found.J:.6g}, te {timing.duration:.4g} -> {found.duration:.4g} s"
     if initial.trajectory.path is not timing.trajectory.path:
+        try:
+            found = timed(timing.trajectory.path)
+        except (InfeasiblePathError, SolverError) as exc:  # (the first path may be timed)
+            first = timed(initial.trajectory.path)
+            return (
+                initial,
+                first,
+                f"{message}; the path found could not be timed under the {limits} ({exc}): "
+                f"the first path is returned, timed under them (te {first.duration:.4g} s)"
+                f"{''.join(late[:1])}",
+            )
         first = timed(initial.trajectory.path)
         if first.J < found.J:
             return (
@@ -727,65 +748,74 @@ def _under_jerk_limits(
                 f"{first.J:.6g} against {found.J:.6g} for the path found without them): it is "
                 f"returned, timed under them (te {first.duration:.4g} s){''.join(late[:1])}",
             )
+    else:
+        found = timed(timing.trajectory.path)
+    note = f"J {timing.J:.6g} -> {found.J:.6g}, te {timing.duration:.4g} -> {found.duration:.4g} s"
     return timing, found, f"{message}; timed under the {limits}: {note}{''.join(late[:1])}"
 
 
 def _smoothed(
     setup: Segment,
     chosen: tuple[TimingResult, JerkTimingResult, str],
-    history: list[Iteration],
+    report: Callable[[Iteration], None],
+    stage_2: tuple[StopReason, int],
     via_s: tuple[float, ...],
-) -> tuple[TimingResult, JerkTimingResult, str]:
+) -> tuple[TimingResult, JerkTimingResult, str, StopReason]:
     """Stage 2 under the jerk (torque-rate) limits (:func:`~nearopt.planning.smooth_iterations`)
     from the path :func:`_under_jerk_limits` chose, with the plan's remaining iterations and
-    time; its iterates join ``history`` (J and t_e under the limits, on the iterate grid; the
-    first, with α None, is the chosen path, so J rises there where the limits bind). The better
-    of the two paths timed under the limits on the plan's grid: its stage-1 timing, its timing
-    under the limits, the message."""
+    time, unless stage 2 (``stage_2``: why it stopped, its history's length) was interrupted;
+    its iterates go to ``report`` (J and t_e under the limits, on the iterate grid; the first,
+    with α None, is the chosen path, so J rises there where the limits bind). The better of the
+    two paths timed under the limits on the plan's grid: its stage-1 timing, its timing under
+    the limits, the message, why the plan stopped."""
     timing, limited, message = chosen
-    left = setup.max_iterations - max(len(history) - 1, 0)
-    if setup.method != Method.SCP or left <= 0 or time.perf_counter() >= setup.deadline:
-        return chosen
+    reason, offset = stage_2
+    left = setup.max_iterations - max(offset - 1, 0)
+    if reason is StopReason.INTERRUPTED or setup.method != Method.SCP:
+        return timing, limited, message, reason
+    if left <= 0 or time.perf_counter() >= setup.deadline:
+        why = "no iterations" if left <= 0 else "no time"
+        return timing, limited, f"{message}; {why} left for stage 2 under the limits", reason
     path, options = timing.trajectory.path, setup.options
     if not isinstance(path, BSplinePath):  # the straight line
         k = options.control_points
         path = BSplinePath.line(setup.q0, setup.qe, k, knot_breaks(options, k))
-    offset = len(history)
-
-    def accept(entry: Iteration, _: TimingResult) -> None:
-        # (its iterate 0, the chosen path under the limits, marks where they begin: α None)
-        history.append(replace(entry, index=entry.index + offset))
-
     count = path.control_points.shape[0] - 2
     try:
         outcome = smooth_iterations(
             setup.robot, setup.cost, path,
             grid=min(setup.grid, max(options.grid, 4 * count)),
             velocity_limits=setup.velocity_limits, position_limits=setup.position_limits,
-            options=options, run=Run(left, setup.deadline, setup.t_start, accept),
-            collisions=setup.collisions, via=via_s,
+            options=options, collisions=setup.collisions, via=via_s,
+            run=Run(left, setup.deadline, setup.t_start,
+                    lambda entry, _: report(replace(entry, index=entry.index + offset))),
         )  # fmt: skip
-        if outcome.iterations == 0:
-            return timing, limited, f"{message}; stage 2 under the limits: {outcome.message}"
+    except (InfeasiblePathError, SolverError) as exc:
+        return timing, limited, f"{message}; stage 2 under the limits failed: {exc}", reason
+    head = f"{message}; stage 2 under the limits from there"
+    if outcome.iterations == 0:
+        return timing, limited, f"{head}: {outcome.message}", outcome.reason
+    try:
         better = time_with_jerk_limits(
             setup.robot, outcome.path, setup.cost, grid=setup.grid,
             velocity_limits=setup.velocity_limits,
             time_limit=max(setup.deadline - time.perf_counter(), 0.0),
         )  # fmt: skip
-        if better.J >= limited.J:  # (J on the iterate grid went down, on the plan's not)
-            return timing, limited, f"{message}; stage 2 under the limits found no lower J"
         plain = optimal_timing(
             setup.robot, outcome.path, setup.cost, grid=setup.grid,
             velocity_limits=setup.velocity_limits,
         )  # fmt: skip
-    except (InfeasiblePathError, SolverError):
-        return chosen
-    return (
-        plain,
-        better,
-        f"{message}; stage 2 under the limits from there: J {limited.J:.6g} -> {better.J:.6g} "
-        f"(te {better.duration:.4g} s) in {outcome.iterations} iterations, {outcome.message}",
+    except (InfeasiblePathError, SolverError) as exc:
+        note = f"{head}: its path could not be timed on the plan's grid ({exc}); the path before"
+        return timing, limited, note, outcome.reason
+    if better.J >= limited.J:  # (J on the iterate grid went down, on the plan's not)
+        note = f"{head}: no lower J on the plan's grid ({outcome.message})"
+        return timing, limited, note, outcome.reason
+    note = (
+        f"{head}: J {limited.J:.6g} -> {better.J:.6g} (te {better.duration:.4g} s) in "
+        f"{outcome.iterations} iteration(s), {outcome.message}"
     )
+    return plain, better, note, outcome.reason
 
 
 def _via_points(

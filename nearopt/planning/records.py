@@ -105,7 +105,8 @@ class SCPOptions:
         in the middle of every other span, the path itself unchanged (knot insertion), K → about
         1.5 K — and stage 2 goes on from it: the path's resolution, not the method, is most of
         what is left to an independent optimum (0.07–0.3 % lower J on ur5 and panda for 15–30 %
-        more time). 0 keeps K.
+        more time). 0 keeps K. Not under jerk or torque-rate limits (a finer path found
+        without them fared worse under them; stage 2 under the limits goes on instead).
     """
 
     control_points: int = 16

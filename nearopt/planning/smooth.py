@@ -36,7 +36,7 @@ from ..errors import ConfigurationError, InfeasiblePathError, SolverError
 from ..path import BSplinePath
 from ..timing import Discretisation, optimal_timing, time_with_jerk_limits
 from .linearisation import path_basis
-from .records import Iteration
+from .records import Iteration, StopReason
 from .scp import IterateParts, iterate_model, new_radius, solve_model, trust_scale
 
 if TYPE_CHECKING:
@@ -66,6 +66,7 @@ class SmoothOutcome:
     judged: JerkTimingResult
     iterations: int
     message: str
+    reason: StopReason = StopReason.CONVERGED
 
 
 def jerk_rows(
@@ -189,41 +190,45 @@ def smooth_iterations(
     now = judged(p0, timed(p0))
     report(0, now, None)
     radius = np.full(count, options.trust_radius)
-    index, small, failures, message = 0, 0, 0, f"{run.max_iterations} iterations"
+    index, small, failures, message = 0, 0, 0, f"the iteration limit ({run.max_iterations})"
     context = (robot, weights, scale, (lower, upper), collisions, start, via)
     held: float | None = None  # the model's J with the path held, once per iterate
-    while index < run.max_iterations:
-        if run.out_of_time():
-            message = "the time limit was reached"
-            break
-        step = _model_step(now, radius, context, held)
-        if step is None:  # numerical trouble: a smaller step is a better-conditioned model
-            failures += 1
-            radius = 0.25 * radius
-            if failures < 3 and radius.max() >= options.min_trust_radius:
-                continue
-            message = "the convex model could not be solved"
-            break
-        failures, (dp, predicted, held) = 0, step
-        j0, promised = now.limited.J, held - predicted
-        if promised <= options.tolerance * abs(j0):
-            message = _GAINS_NOTHING.format(options.tolerance)
-            break
-        trial = _trial(timed, judged, path_of, now.p + dp, (j0, collisions))
-        gain = -np.inf if trial is None else j0 - trial.limited.J
-        reach = np.max((np.abs(dp) / scale).reshape(count, n), axis=1)
-        radius = new_radius(radius, gain, gain / promised, reach)
-        if gain > 0.0:
-            now, index, held = trial, index + 1, None
-            report(index, now, float(np.max(np.abs(dp))))
-            small = small + 1 if gain < options.tolerance * abs(j0) else 0
-            if small == 3:
-                message = _J_STOPPED.format(options.tolerance)
+    reason = StopReason.ITERATION_LIMIT
+    try:
+        while index < run.max_iterations:
+            if run.out_of_time():
+                reason, message = StopReason.TIME_LIMIT, "the time limit was reached"
                 break
-        if radius.max() < options.min_trust_radius:
-            message = _NO_STEP.format(options.min_trust_radius)
-            break
-    return SmoothOutcome(now.parts.path, now.limited, index, message)
+            step = _model_step(now, radius, context, held)
+            if step is None:  # numerical trouble: a smaller step is a better-conditioned model
+                failures += 1
+                radius = 0.25 * radius
+                if failures < 3 and radius.max() >= options.min_trust_radius:
+                    continue
+                reason, message = StopReason.SOLVER, "the convex model could not be solved"
+                break
+            failures, (dp, predicted, held) = 0, step
+            j0, promised = now.limited.J, held - predicted
+            if promised <= options.tolerance * abs(j0):
+                reason, message = StopReason.CONVERGED, _GAINS_NOTHING.format(options.tolerance)
+                break
+            trial = _trial(timed, judged, path_of, now.p + dp, (j0, collisions))
+            gain = -np.inf if trial is None else j0 - trial.limited.J
+            reach = np.max((np.abs(dp) / scale).reshape(count, n), axis=1)
+            radius = new_radius(radius, gain, gain / promised, reach)
+            if gain > 0.0:
+                now, index, held = trial, index + 1, None
+                report(index, now, float(np.max(np.abs(dp))))
+                small = small + 1 if gain < options.tolerance * abs(j0) else 0
+                if small == 3:
+                    reason, message = StopReason.CONVERGED, _J_STOPPED.format(options.tolerance)
+                    break
+            if radius.max() < options.min_trust_radius:
+                reason, message = StopReason.CONVERGED, _NO_STEP.format(options.min_trust_radius)
+                break
+    except KeyboardInterrupt:  # (Ctrl-C: the best iterate so far)
+        reason, message = StopReason.INTERRUPTED, f"interrupted after {index} iteration(s)"
+    return SmoothOutcome(now.parts.path, now.limited, index, message, reason)
 
 
 _GAINS_NOTHING = "converged: the model finds no path that lowers J by more than {:g} relative"

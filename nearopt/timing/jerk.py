@@ -324,7 +324,7 @@ def jerk_limited_timing(
             if time.perf_counter() >= deadline:
                 timed_out = True
                 break
-            bbar = np.maximum(x[model.iB], 1e-300)
+            bbar = _floored(x[model.iB])
         assert best is not None
         x = best[1]
         more = rate_none if model.tq is None else model.torque_excess(robot, path, x)
@@ -337,12 +337,31 @@ def jerk_limited_timing(
         model = _Model(robot, path, s, jerk, acc, torque, weights, extra, rate, rate_extra)
         model.last_z = last_z  # (for the banded kernel's screening of rows)
         x = model.within_rates(x[: model.iB[-1] + 1])  # b, m and B keep their places
-        bbar = np.maximum(x[model.iB], 1e-300)
+        bbar = _floored(x[model.iB])
         # with new torque-rate points only, the slowed-down x holds every row of the new model:
         # where its first program fails, it is the timing (its J above the last program's)
         fallback = (np.inf, x) if not more[0].size else None
     timing = model.timing(x, tuple(history), tuple(solvers), timed_out)
-    return _slowed_down(timing, robot, path, acc, jerk)
+    return _finite(_slowed_down(timing, robot, path, acc, jerk), jerk)
+
+
+def _finite(timing: JerkTiming, jerk: NDArray[np.float64]) -> JerkTiming:
+    """The timing, or a SolverError where it is not finite (a NaN timing was returned at a jerk
+    limit of 1e-9 rad/s³)."""
+    inner = timing.m[1:-1]
+    if not (np.all(np.isfinite(timing.b)) and np.all(np.isfinite(inner)) and timing.duration > 0):
+        raise SolverError(
+            "the jerk-limited timing is not finite: its limits are too far below what the "
+            f"path needs at its scale (jerk limits down to {np.min(jerk):.3g}, the duration "
+            f"came out {timing.duration:.3g} s)"
+        )
+    return timing
+
+
+def _floored(bbar: NDArray[np.float64]) -> NDArray[np.float64]:
+    """B̄ for the next restriction: each B_k at least 1e-12 of the largest (a B_k of 0 or
+    1e-300 made B̄^{-3/2} overflow, and the timing NaN, at a jerk limit of 1e-9 rad/s³)."""
+    return np.maximum(bbar, 1e-12 * max(float(np.max(bbar)), 1e-300))
 
 
 def _slowed_down(
