@@ -793,8 +793,9 @@ def _smoothed(
     except (InfeasiblePathError, SolverError) as exc:
         return timing, limited, f"{message}; stage 2 under the limits failed: {exc}", reason
     head = f"{message}; stage 2 under the limits from there"
-    if outcome.iterations == 0:
-        return timing, limited, f"{head}: {outcome.message}", outcome.reason
+    if outcome.iterations == 0:  # (the plan is stage 2's: its status, unless interrupted now)
+        ended = outcome.reason if outcome.reason is StopReason.INTERRUPTED else reason
+        return timing, limited, f"{head}: {outcome.message}", ended
     try:
         better = time_with_jerk_limits(
             setup.robot, outcome.path, setup.cost, grid=setup.grid,

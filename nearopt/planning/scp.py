@@ -75,6 +75,7 @@ if TYPE_CHECKING:
 __all__ = [
     "sequential_convex",
     "IterateParts",
+    "after_failure",
     "iterate_model",
     "new_radius",
     "solve_model",
@@ -196,9 +197,8 @@ def sequential_convex(
         j0 = timing.objective
         step = solve_model(disc, weights, model, z, p, bound, lower, upper)
         if step is None:  # numerical trouble: a smaller step is a better-conditioned model
-            failures += 1
-            radius = 0.25 * radius
-            if failures < 3 and radius.max() >= options.min_trust_radius:
+            failures, radius, retry = after_failure(failures, radius, options)
+            if retry:
                 continue
             reason, message = StopReason.SOLVER, "the convex model could not be solved"
             break
@@ -311,6 +311,16 @@ def _timer(
         )
 
     return time_it
+
+
+def after_failure(
+    failures: int, radius: NDArray[np.float64], options: SCPOptions
+) -> tuple[int, NDArray[np.float64], bool]:
+    """After the convex model failed: the failures in a row, the trust region cut to a quarter
+    (a smaller step is a better-conditioned model), and whether to try again (fewer than 3
+    failures, the radius above its minimum)."""
+    failures, radius = failures + 1, 0.25 * radius
+    return failures, radius, failures < 3 and radius.max() >= options.min_trust_radius
 
 
 def new_radius(

@@ -37,7 +37,14 @@ from ..path import BSplinePath
 from ..timing import Discretisation, optimal_timing, time_with_jerk_limits
 from .linearisation import path_basis
 from .records import Iteration, StopReason
-from .scp import IterateParts, iterate_model, new_radius, solve_model, trust_scale
+from .scp import (
+    IterateParts,
+    after_failure,
+    iterate_model,
+    new_radius,
+    solve_model,
+    trust_scale,
+)
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -201,9 +208,8 @@ def smooth_iterations(
                 break
             step = _model_step(now, radius, context, held)
             if step is None:  # numerical trouble: a smaller step is a better-conditioned model
-                failures += 1
-                radius = 0.25 * radius
-                if failures < 3 and radius.max() >= options.min_trust_radius:
+                failures, radius, retry = after_failure(failures, radius, options)
+                if retry:
                     continue
                 reason, message = StopReason.SOLVER, "the convex model could not be solved"
                 break

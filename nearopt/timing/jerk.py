@@ -1652,8 +1652,11 @@ def time_with_jerk_limits(
     only with ``velocity_limits``; ``time_limit`` [s] as there), as a motion."""
     start = time.perf_counter()
     limited = robot if velocity_limits else robot.with_limits(velocity=np.inf)
-    timing = jerk_limited_timing(
-        limited, path, robot.limits.jerk, cost, grid=grid, time_limit=time_limit
-    )
+    # (limits far below a path's own scale overflow on the way: the timing is checked to be
+    # finite at the end, a SolverError otherwise, so numpy's warnings would say it twice)
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        timing = jerk_limited_timing(
+            limited, path, robot.limits.jerk, cost, grid=grid, time_limit=time_limit
+        )
     motion = SmoothTrajectory(path, timing, robot.inverse_dynamics_batch)
     return JerkTimingResult(motion, cost, timing, time.perf_counter() - start)
