@@ -41,6 +41,7 @@ from .planning import (
     plan,
     plan_task,
 )
+from .planning.ends import check_velocity
 from .planning.planner import minimum_duration
 from .planning.task import check_targets
 from .robot import Robot
@@ -681,35 +682,18 @@ def _check_in_degrees(
     via: list[NDArray[np.float64]],
 ) -> None:
     """A ``--deg`` request's configurations within the position limits and its boundary
-    velocities within the speed limits (where those hold), as the planner checks them, but a
-    ConfigurationError in degrees (deg, deg/s) naming the joint."""
-    lim, names = robot.limits, robot.joint_names
+    velocities within the speed limits (where those hold), by the planner's own checks, said in
+    degrees (deg, deg/s) before the planner would say them in rad."""
     if not request.no_position_limits:
         points = [("q0", q0), *((f"via[{k}]", v) for k, v in enumerate(via))]
         if isinstance(qe, np.ndarray):
             points.append(("qe", qe))
         for what, q in points:
-            outside = ~((lim.position_lower <= q) & (q <= lim.position_upper))
-            if q.shape == (robot.n,) and np.any(outside):
-                i = int(np.argmax(outside))
-                low, high = np.rad2deg([lim.position_lower[i], lim.position_upper[i]])
-                raise ConfigurationError(
-                    f"{what}[{i}] = {np.rad2deg(q[i]):.6g} deg is outside the position limits "
-                    f"[{low:.6g}, {high:.6g}] deg of joint {names[i]!r}",
-                    joint=names[i],
-                )
+            if q.shape == (robot.n,):
+                robot.limits.check_within(q, what, degrees=True)
     for what, given in (("qd0", request.qd0), ("qde", request.qde)):
-        if given is None or request.no_velocity_limits or len(given) != robot.n:
-            continue
-        v = np.asarray(given, dtype=float)
-        over = np.abs(np.deg2rad(v)) - lim.velocity * (1.0 + 1e-12)
-        if np.any(over > 0.0):
-            i = int(np.argmax(over))
-            raise ConfigurationError(
-                f"{what} of joint {names[i]!r} is {v[i]:.6g} deg/s, beyond its speed limit "
-                f"{np.rad2deg(lim.velocity[i]):.6g} deg/s",
-                joint=names[i],
-            )
+        if given is not None and not request.no_velocity_limits and len(given) == robot.n:
+            check_velocity(robot, np.deg2rad(given), what, True, degrees=True)
 
 
 def solve(

@@ -117,6 +117,11 @@ def main() -> None:
             f"{nearopt_jerk(timing, path):>18.4f}{copp_jerk(path, s_t):>7.3f}",
             flush=True,
         )
+    summary(ratios, walls)
+
+
+def summary(ratios: list[float], walls: list[float]) -> None:
+    """The last line: nearopt / copp's durations and wall times, median and largest."""
     print(
         f"nearopt / copp TOPP3-LP: duration median {np.median(ratios):.4f}, max "
         f"{np.max(ratios):.4f}; wall time median {np.median(walls):.2f}, max {np.max(walls):.2f}"

@@ -24,21 +24,13 @@ import re
 import time
 
 import numpy as np
+from bench_duration import motion
 
 import nearopt
 from nearopt.timing import load_kernel, time_with_jerk_limits
 
 WEIGHT = 1e-3
 JERKS = {"ur5": (30.0, 300.0), "panda": (50.0, 500.0), "two_link": (300.0, 3000.0)}
-
-
-def motion(robot: nearopt.Robot, seed: int) -> tuple[np.ndarray, np.ndarray]:
-    """A start and goal within 40 % of each joint's range around its middle."""
-    rng = np.random.default_rng(seed)
-    lo = np.maximum(robot.limits.position_lower, -3.0)
-    hi = np.minimum(robot.limits.position_upper, 3.0)
-    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
-    return tuple(mid + 0.4 * half * rng.uniform(-1, 1, robot.n) for _ in range(2))
 
 
 def main() -> None:
@@ -68,7 +60,7 @@ def main() -> None:
                 wall = time.perf_counter() - start
                 before = min(line, found)
                 gains.append(result.J / before - 1.0)
-                found_its = re.search(r"from there: .* in (\d+) iterations", result.message)
+                found_its = re.search(r"from there: .* in (\d+) iteration", result.message)
                 smooth = int(found_its.group(1)) if found_its else 0
                 ok = nearopt.verify_plan(result).passed
                 print(

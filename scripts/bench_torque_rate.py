@@ -23,7 +23,7 @@ import time
 
 import copp_py as copp
 import numpy as np
-from bench_jerk import ACCELERATION, JERK, copp_topp3
+from bench_jerk import ACCELERATION, JERK, copp_topp3, summary
 from bench_timing import spline
 
 import nearopt
@@ -112,10 +112,7 @@ def main() -> None:
             f"{ours:>18.4f}{copp_excess(robot, path, s_t, rate):>7.3f}",
             flush=True,
         )
-    print(
-        f"nearopt / copp TOPP3-LP: duration median {np.median(ratios):.4f}, max "
-        f"{np.max(ratios):.4f}; wall time median {np.median(walls):.2f}, max {np.max(walls):.2f}"
-    )
+    summary(ratios, walls)
 
 
 if __name__ == "__main__":

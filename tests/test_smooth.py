@@ -70,17 +70,20 @@ def test_the_jerk_rows_are_the_discrete_jerk_and_a_restriction_of_it(name: str) 
     assert held > 0  # (the check compared something)
 
 
-def test_a_plan_under_jerk_limits_goes_on_under_them() -> None:
-    """ur5 at 300 rad/s³ (f0 = 1 + 1e-3 Σu²): stage 2 without the limit finds a path better
-    than the line under them too; stage 2 under the limits, from there, lowers J further, every
-    accepted iterate below the one before; the plan is verified (the jerk at every sample)."""
+def _ur5_case() -> tuple[nearopt.Robot, np.ndarray, np.ndarray, nearopt.TorqueCost]:
     free = nearopt.Robot.from_name("ur5")
     rng = np.random.default_rng(0)
     lo, hi = np.maximum(free.limits.position_lower, -3), np.minimum(free.limits.position_upper, 3)
     q0, qe = (0.5 * (lo + hi) + 0.2 * (hi - lo) * rng.uniform(-1, 1, 6) for _ in range(2))
-    cost = nearopt.TorqueCost(1e-3)
-    robot = free.with_limits(jerk=300.0)
-    found = nearopt.plan(free, q0, qe, cost)
+    return free.with_limits(jerk=300.0), q0, qe, nearopt.TorqueCost(1e-3)
+
+
+def test_a_plan_under_jerk_limits_goes_on_under_them() -> None:
+    """ur5 at 300 rad/s³ (f0 = 1 + 1e-3 Σu²): stage 2 without the limit finds a path better
+    than the line under them too; stage 2 under the limits, from there, lowers J further, every
+    accepted iterate below the one before; the plan is verified (the jerk at every sample)."""
+    robot, q0, qe, cost = _ur5_case()
+    found = nearopt.plan(robot.with_limits(jerk=np.inf), q0, qe, cost)
     result = nearopt.plan(robot, q0, qe, cost)
     line = nearopt.plan(robot, q0, qe, cost, max_iterations=0)
     before = min(line.J, time_with_jerk_limits(robot, found.trajectory.path, cost).J)
@@ -93,14 +96,6 @@ def test_a_plan_under_jerk_limits_goes_on_under_them() -> None:
     report = nearopt.verify_plan(result)
     assert report.passed, report
     assert "joint jerk limits" in {c.name for c in report.checks}
-
-
-def _ur5_case() -> tuple[nearopt.Robot, np.ndarray, np.ndarray, nearopt.TorqueCost]:
-    free = nearopt.Robot.from_name("ur5")
-    rng = np.random.default_rng(0)
-    lo, hi = np.maximum(free.limits.position_lower, -3), np.minimum(free.limits.position_upper, 3)
-    q0, qe = (0.5 * (lo + hi) + 0.2 * (hi - lo) * rng.uniform(-1, 1, 6) for _ in range(2))
-    return free.with_limits(jerk=300.0), q0, qe, nearopt.TorqueCost(1e-3)
 
 
 def test_the_phase_under_the_limits_reports_stops_and_can_be_interrupted() -> None:

@@ -396,11 +396,12 @@ def check_velocities(
 
 
 def check_velocity(
-    robot: Robot, value: object, name: str, velocity_limits: bool
+    robot: Robot, value: object, name: str, velocity_limits: bool, degrees: bool = False
 ) -> NDArray[np.float64]:
     """A joint velocity [rad/s or m/s] as a vector of the robot's length; ConfigurationError
     for a wrong shape, a value that is not a finite real number, or one beyond the joint's speed
-    limit (where those are enforced), naming ``name`` and the joint."""
+    limit (where those are enforced), naming ``name`` and the joint (in deg/s with ``degrees``:
+    a request given in them)."""
     v = real_array(value)
     if v is None or v.shape != (robot.n,) or not np.all(np.isfinite(v)):
         raise ConfigurationError(
@@ -410,9 +411,12 @@ def check_velocity(
     over = np.abs(v) - limit * (1.0 + 1e-12) if velocity_limits else np.zeros(robot.n)
     if np.any(over > 0.0):
         i = int(np.argmax(over))
+        unit, given, most = ("rad/s", v[i], limit[i])
+        if degrees:
+            unit, given, most = ("deg/s", *np.rad2deg([v[i], limit[i]]))
         raise ConfigurationError(
-            f"{name} of joint {robot.joint_names[i]!r} is {v[i]:.6g} rad/s, beyond its speed "
-            f"limit {limit[i]:.6g} rad/s",
+            f"{name} of joint {robot.joint_names[i]!r} is {given:.6g} {unit}, beyond its speed "
+            f"limit {most:.6g} {unit}",
             joint=robot.joint_names[i],
         )
     return v

@@ -25,7 +25,7 @@ timed under them.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -199,14 +199,13 @@ def smooth_iterations(
     radius = np.full(count, options.trust_radius)
     index, small, failures, message = 0, 0, 0, f"the iteration limit ({run.max_iterations})"
     context = (robot, weights, scale, (lower, upper), collisions, start, via)
-    held: float | None = None  # the model's J with the path held, once per iterate
     reason = StopReason.ITERATION_LIMIT
     try:
         while index < run.max_iterations:
             if run.out_of_time():
                 reason, message = StopReason.TIME_LIMIT, "the time limit was reached"
                 break
-            step = _model_step(now, radius, context, held)
+            step = _model_step(now, radius, context)
             if step is None:  # numerical trouble: a smaller step is a better-conditioned model
                 failures, radius, retry = after_failure(failures, radius, options)
                 if retry:
@@ -223,7 +222,7 @@ def smooth_iterations(
             reach = np.max((np.abs(dp) / scale).reshape(count, n), axis=1)
             radius = new_radius(radius, gain, gain / promised, reach)
             if gain > 0.0:
-                now, index, held = trial, index + 1, None
+                now, index = trial, index + 1
                 report(index, now, float(np.max(np.abs(dp))))
                 small = small + 1 if gain < options.tolerance * abs(j0) else 0
                 if small == 3:
@@ -250,20 +249,24 @@ class _Judged:
     p: NDArray[np.float64]
     parts: IterateParts
     limited: JerkTimingResult
+    memo: dict = field(default_factory=dict, compare=False)  # what its models share
 
 
 def _model_step(
-    now: _Judged, radius: NDArray[np.float64], context: tuple, held: float | None
+    now: _Judged, radius: NDArray[np.float64], context: tuple
 ) -> tuple[NDArray[np.float64], float, float] | None:
     """The model's best step Δp within the trust radius, its J there and its J with the path
-    held (``held``, computed where None); None where the model cannot be solved."""
+    held; None where the model cannot be solved. What depends on the iterate alone (its grid,
+    basis, jerk rows and the model's J with the path held) is built once per iterate, in
+    ``now.memo``: a rejected step's smaller model takes it again."""
     robot, weights, scale, bounds, collisions, start, via = context
-    timing, path = now.parts.timing, now.parts.path
-    disc = Discretisation.of(timing.problem)
-    z = timing.b[1:-1]
-    basis = path_basis(path, disc)
-    b_lin = now.limited.timing.evaluate(disc.problem.sigma)[0]
-    extra = jerk_rows(disc, path, b_lin, robot.limits.jerk)
+    if "inputs" not in now.memo:
+        timing, path = now.parts.timing, now.parts.path
+        disc = Discretisation.of(timing.problem)
+        b_lin = now.limited.timing.evaluate(disc.problem.sigma)[0]
+        extra = jerk_rows(disc, path, b_lin, robot.limits.jerk)
+        now.memo["inputs"] = (disc, timing.b[1:-1], path_basis(path, disc), extra)
+    disc, z, basis, extra = now.memo["inputs"]
 
     def solved(r: NDArray[np.float64]) -> tuple | None:
         bound = np.repeat(r, robot.n) * scale
@@ -278,15 +281,15 @@ def _model_step(
         )
         return solve_model(disc, weights, model, z, now.p, bound, *bounds)
 
-    if held is None:
+    if "held" not in now.memo:
         still = solved(np.full(radius.size, HELD))
         if still is None:
             return None
-        held = still[1]
+        now.memo["held"] = still[1]
     moved = solved(radius)
     if moved is None:
         return None
-    return moved[0], moved[1], held
+    return moved[0], moved[1], now.memo["held"]
 
 
 def _trial(

@@ -159,17 +159,21 @@ class JointLimits:
     def _joint(self, i: int) -> str | None:
         return self.names[i] if self.names else None
 
-    def check_within(self, q: ArrayLike, what: str = "q") -> None:
+    def check_within(self, q: ArrayLike, what: str = "q", degrees: bool = False) -> None:
         """Raise a :class:`~nearopt.ConfigurationError` naming the first joint of ``q`` (n,)
-        outside its position limits, its value and the limits."""
+        outside its position limits, its value and the limits (in degrees with ``degrees``:
+        a request given in them)."""
         q = np.asarray(q, dtype=float)
         outside = ~((self.position_lower <= q) & (q <= self.position_upper))
         if np.any(outside):
             i = int(np.argmax(outside))
+            unit, suffix = ("deg", " deg") if degrees else ("rad", "")
+            value, low, high = (q[i], self.position_lower[i], self.position_upper[i])
+            if degrees:
+                value, low, high = np.rad2deg([value, low, high])
             raise ConfigurationError(
-                f"{what}[{i}] = {q[i]:.6g} rad is outside the position limits "
-                f"[{self.position_lower[i]:.6g}, {self.position_upper[i]:.6g}] of joint "
-                f"{self._name(i)}",
+                f"{what}[{i}] = {value:.6g} {unit} is outside the position limits "
+                f"[{low:.6g}, {high:.6g}]{suffix} of joint {self._name(i)}",
                 joint=self._joint(i),
             )
 

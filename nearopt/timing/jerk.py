@@ -359,8 +359,8 @@ def _finite(timing: JerkTiming, jerk: NDArray[np.float64]) -> JerkTiming:
 
 
 def _floored(bbar: NDArray[np.float64]) -> NDArray[np.float64]:
-    """B̄ for the next restriction: each B_k at least 1e-12 of the largest (a B_k of 0 or
-    1e-300 made B̄^{-3/2} overflow, and the timing NaN, at a jerk limit of 1e-9 rad/s³)."""
+    """B̄ for the next restriction: each B_k at least 1e-12 of the largest, so that the
+    tangent's B̄^{-3/2} stays within floating point (a floor of 1e-300 overflows it)."""
     return np.maximum(bbar, 1e-12 * max(float(np.max(bbar)), 1e-300))
 
 
@@ -1457,10 +1457,11 @@ class _Model:
             start.astype(np.int64), ell * unit, omega, c0, alpha * unit, g, weights,
             unit * (self.reduction.T @ lin),
         )  # fmt: skip
-        z0 = self._banded_start(bbar, previous) / unit
+        last = None if previous is None else self._as_z(previous)
+        z0 = self._banded_start(bbar, last) / unit
         reference = change = None
-        if previous is not None:  # the last optimum and the step that led to it, for screening
-            reference = self._as_z(previous) / unit
+        if last is not None:  # the last optimum and the step that led to it, for screening
+            reference = last / unit
             if self.last_z is not None:
                 change = reference - self.last_z / unit
         self.last_z = z0 * unit if reference is None else reference * unit
@@ -1473,17 +1474,16 @@ class _Model:
         return unit * (self.reduction @ solution.z), solution.value
 
     def _banded_start(
-        self, bbar: NDArray[np.float64], previous: NDArray[np.float64] | None
+        self, bbar: NDArray[np.float64], last: NDArray[np.float64] | None
     ) -> NDArray[np.float64]:
-        """z to start from: 0.9 times the last solution (strictly inside its rows where they
-        scale with b), or B̄ for every m and B at first."""
-        if previous is None:
+        """z to start from: 0.9 times the last solution (``last``, in z, :meth:`_as_z`;
+        strictly inside its rows where they scale with b), or B̄ for every m and B at first."""
+        if last is None:
             z = np.zeros(2 * self.inner.size)
             z[0::2] = bbar[self.inner]
             z[1::2] = bbar[self.inner]
             return z
-        z = self._as_z(previous)
-        return _START_SHARE * np.maximum(z, 1e-12 * float(np.max(bbar)))
+        return _START_SHARE * np.maximum(last, 1e-12 * float(np.max(bbar)))
 
     def _as_z(self, x: NDArray[np.float64]) -> NDArray[np.float64]:
         """The banded kernel's variables of a solution x (in x's units): m_k and B_k of each

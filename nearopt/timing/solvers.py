@@ -261,9 +261,10 @@ def _solve_convex(
     solutions = []
     torque_rows = disc.blocks.torque
     deadline = time.perf_counter() + time_limit
-    infeasible = [0]  # rounds in a row Clarabel found infeasible
+    infeasible = 0  # rounds in a row Clarabel found infeasible
 
     def socp(z_lin: NDArray[np.float64]) -> NDArray[np.float64]:
+        nonlocal infeasible
         if time.perf_counter() >= deadline:  # building a large SOCP alone takes seconds
             raise out_of_time(disc.problem, time_limit)
         rows, z_upper = disc.solver_rows(z_lin)
@@ -289,8 +290,8 @@ def _solve_convex(
             if is_solved(sol.status) or "Infeasible" in str(sol.status):
                 break  # (a certificate of infeasibility does not change with the tolerance)
         solutions.append(sol)
-        infeasible[0] = infeasible[0] + 1 if "Infeasible" in str(sol.status) else 0
-        if infeasible[0] >= 1 + disc.has_damping:
+        infeasible = infeasible + 1 if "Infeasible" in str(sol.status) else 0
+        if infeasible >= 1 + disc.has_damping:
             # the damping's tangent at an infeasible answer means nothing: once (twice with a
             # tangent, whose restriction may be what is infeasible) is enough — a moving end
             # xarm7 re-plan spent 21 s in 30 rounds × 3 tolerances of 'PrimalInfeasible'
