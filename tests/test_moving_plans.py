@@ -220,6 +220,48 @@ def test_replanning_a_nearly_stopped_arm_costs_what_replanning_it_at_rest_does(s
     np.testing.assert_allclose(moving.trajectory.states(np.zeros(1))[1][0], qd[0], atol=1e-12)
 
 
+def test_a_moving_start_the_iterate_grid_misjudges_is_iterated_on_the_plans_grid() -> None:
+    """A ur5 re-planned from half-way through a motion (the state of bench_moving_ends, seed 2):
+    the 64-segment iterate grid put the iterates' J 1.4 % below the plan's grid, and stage 2
+    followed its error (J 3.8697, IPOPT 3.8230). The refined run iterates on the plan's grid
+    then: J within 0.1 % of stage 2 iterating on the plan's grid throughout."""
+    robot = load("ur5")
+    q = np.array([-0.7135679882310813, -1.3088863415237113, 0.8771095912489432,
+                  0.19078439526299132, 0.13444138006510262, 0.5529208353512008])  # fmt: skip
+    qd = np.array([-0.3561401174488957, -0.4253849067093328, -3.1499946869036934,
+                   2.45275117146624, -0.20673051051738514, -3.047731947116208])  # fmt: skip
+    q2 = np.array([-0.1616861020685108, 0.4063135165788487, -0.18531678415169328,
+                   0.3196425582578794, 1.1218462859848242, 0.43935557354310073])  # fmt: skip
+    result = nearopt.plan(robot, q, q2, COST, qd0=qd)
+    fine = nearopt.plan(robot, q, q2, COST, qd0=qd, options=nearopt.SCPOptions(grid=200))
+    assert "iterated on the plan's grid" in result.message
+    assert result.J <= fine.J * (1 + 1e-3), (result.J, fine.J)
+    assert nearopt.verify_plan(result).passed
+
+
+@pytest.mark.parametrize("end", ["start", "end"])
+def test_a_joint_too_fast_to_stop_before_its_limit_is_named(end: str) -> None:
+    """ur5's elbow 1e-6 rad below its upper limit, at 0.1 rad/s toward it at the start (away
+    from it at the end: it came from there): braking needs ~1e-5 rad, and the refusal says so,
+    naming the joint, instead of where stage 1 found no speed on the line."""
+    robot = load("ur5")
+    upper = robot.limits.position_upper
+    q0 = np.array([0.3, -1.2, 1.4, -1.6, -1.4, 0.2])
+    qe = np.array([0.6, -1.8, 2.0, -0.6, -0.9, -0.8])
+    qd = np.array([0.2, 0.1, 0.1, 0.1, 0.0, 0.1])
+    if end == "start":
+        q0[2] = upper[2] - 1e-6
+        ends = {"qd0": qd}
+    else:
+        qe[2] = upper[2] - 1e-6
+        ends = {"qde": qd * np.array([1, 1, -1, 1, 1, 1])}
+    with pytest.raises(nearopt.InfeasiblePathError) as info:
+        nearopt.plan(robot, q0, qe, COST, **ends)
+    text = str(info.value)
+    assert "elbow_joint" in text and "1e-06 rad from its upper position limit" in text
+    assert ("cannot stop" if end == "start" else "cannot have sped up") in text
+
+
 def test_a_nearly_resting_start_toward_a_position_limit_stays_within_it() -> None:
     """A panda start 0.03 rad below joint 4's upper limit, θ̇ = 1e-4 rad/s toward it: the
     plan from rest turned onto that direction keeps its first leg within the room left (it

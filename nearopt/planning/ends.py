@@ -44,6 +44,7 @@ __all__ = [
     "check_velocity",
     "end_terms",
     "leaving_along",
+    "stopping_short",
     "turned_onto",
 ]
 
@@ -276,6 +277,48 @@ def braking_distance(
         )
     a = float(np.min(most))
     return float(qd @ qd) / (2.0 * a) if a > 0.0 else np.inf
+
+
+def stopping_short(
+    robot: Robot,
+    q: NDArray[np.float64],
+    qd: NDArray[np.float64] | None,
+    bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
+    start: bool,
+) -> str | None:
+    """Why no timing can start at (q, qd) — the first joint that moves toward a position bound
+    faster than it can stop within the room left, braking as hard as the torque limits allow
+    any one joint at that state (at the end: the first that arrives from a bound faster than it
+    could have sped up within the room); None where each can. The bound is the state's: over a
+    room of a few mrad it hardly changes, over a long one it is an estimate (it is asked only
+    where no path could be timed)."""
+    if qd is None:
+        return None
+    lower, upper = bounds
+    sign = np.sign(qd) * (1.0 if start else -1.0)  # toward the bound the joint must not pass
+    room = np.where(sign > 0.0, upper - q, np.where(sign < 0.0, q - lower, np.inf))
+    inverse = np.linalg.inv(robot.mass_matrix(q))
+    bias = robot.inverse_dynamics(q, qd, np.zeros(robot.n))
+    lo, hi = robot.limits.effort_lower, robot.limits.effort_upper
+    mid, half = 0.5 * (lo + hi), 0.5 * (hi - lo)
+    for i in np.flatnonzero(np.isfinite(room) & (sign != 0.0)):
+        # the largest θ̈_i away from that bound over the torque box (at the end, in time forward:
+        # the acceleration that built the speed up)
+        most = -sign[i] * (inverse[i] @ (mid - bias)) + np.abs(inverse[i]) @ half
+        need = qd[i] ** 2 / (2.0 * most) if most > 0.0 else np.inf
+        if need > room[i]:
+            word = "qd0" if start else "qde"
+            side = "upper" if (sign[i] > 0.0) else "lower"
+            limit = upper[i] if sign[i] > 0.0 else lower[i]
+            act = "stop" if start else "have sped up"
+            return (
+                f"{word} of joint {robot.joint_names[i]} is {qd[i]:.6g} rad/s, "
+                f"{room[i]:.3g} rad from its {side} position limit {limit:.6g} rad: it cannot "
+                f"{act} within that room ({'braking' if start else 'speeding up'} as hard as "
+                f"the torque limits allow there, {max(most, 0.0):.4g} rad/s², takes "
+                f"{need:.3g} rad)"
+            )
+    return None
 
 
 def _room(

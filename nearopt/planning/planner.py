@@ -878,6 +878,12 @@ def _clear_solution(
     return qe
 
 
+GRID_TRUST = 5e-3
+"""How much lower the iterate grid may put a path's J than the plan's grid (relatively) before
+the refined run iterates on the plan's grid (moving starts: the coarse grid misjudged J by up to
+4 %, and stage 2 followed its error)."""
+
+
 def _refined(
     setup: Segment,
     first: MethodOutcome,
@@ -901,14 +907,20 @@ def _refined(
     count = fine.control_points.shape[0] - 2
     if count > MAX_CONTROL_POINTS:
         return first
+    misjudged = first.timing.J / history[-1].J - 1.0  # the plan's grid against the iterates'
+    options: SCPOptions = common["options"]  # type: ignore[assignment]
+    if misjudged > GRID_TRUST and options.grid < setup.grid:
+        common = dict(common, options=replace(options, grid=setup.grid))
     second = _continued(
         setup.robot, setup.q0, setup.qe, setup.cost, goal, first, fine, common, history,
         setup.collisions, via, setup.duration, setup.ends,
     )  # fmt: skip
     if second is first:
         return first
-    note = f"{second.message} (the path refined to {count} control points)"
-    return replace(second, message=note)
+    note = f"{second.message} (the path refined to {count} control points"
+    if misjudged > GRID_TRUST:
+        note += f", iterated on the plan's grid: the iterates' put J {misjudged:.1%} low"
+    return replace(second, message=note + ")")
 
 
 def _continued(

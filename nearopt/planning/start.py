@@ -22,7 +22,7 @@ from ..errors import (
 from ..parallel import in_parallel
 from ..path import BSplinePath, Path, StraightPath
 from ..timing import optimal_timing
-from .ends import braking_distance, leaving_along
+from .ends import braking_distance, leaving_along, stopping_short
 from .records import MAX_CONTROL_POINTS, Method, Run, SCPOptions, Segment
 from .scp import knot_breaks, path_through, sequential_convex
 
@@ -281,6 +281,10 @@ def _leaving_line(setup: Segment) -> BSplinePath:
         if best is None or timing.J < best[0]:
             best = (timing.J, path)
     if best is None:
+        for q, qd, at_start in ((setup.q0, setup.ends[0], True), (setup.qe, setup.ends[1], False)):
+            why = stopping_short(robot, q, qd, (lower, upper), at_start)
+            if why is not None:
+                raise InfeasiblePathError(f"no plan: {why}")
         raise InfeasiblePathError(
             "no plan: the straight line with the boundary velocities (leaving along qd0, "
             f"arriving along qde) cannot be timed: {first_error}"
