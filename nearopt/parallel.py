@@ -18,9 +18,10 @@ from typing import TypeVar
 
 from .errors import NearoptError, SolverError
 
-__all__ = ["in_parallel", "in_child", "in_children", "cores"]
+__all__ = ["in_parallel", "in_child", "in_children", "beside", "cores"]
 
 T = TypeVar("T")
+U = TypeVar("U")
 
 
 def cores() -> int:
@@ -78,6 +79,32 @@ def in_children(
             _end(pid, read)
         raise
     return results  # type: ignore[return-value]
+
+
+def beside(
+    here: Callable[[], T],
+    there: Callable[[], U],
+    wanted: Callable[[T], bool],
+    what: str = "a parallel part of the plan",
+) -> tuple[T, U | None]:
+    """``here()`` in this process while ``there()`` runs in a forked child; their results, the
+    child's None where ``wanted(here's result)`` is false (the child is then ended without
+    waiting for it: e.g. here was interrupted). One after the other in this process where
+    ``os.fork`` is missing or this process may run on one core only. Errors as
+    :func:`in_parallel`."""
+    if not hasattr(os, "fork") or cores() < 2:
+        mine = here()
+        return mine, there() if wanted(mine) else None
+    child = _fork(there)
+    try:
+        mine = here()
+    except BaseException:
+        _end(*child)
+        raise
+    if not wanted(mine):
+        _end(*child)
+        return mine, None
+    return mine, _collect(*child, what)  # type: ignore[return-value]
 
 
 def in_child(task: Callable[[], T], what: str = "a parallel part of the plan") -> T:

@@ -3,12 +3,13 @@
 from __future__ import annotations
 
 import os
+import time
 
 import numpy as np
 import pytest
 
 import nearopt
-from nearopt.parallel import cores, in_child, in_children, in_parallel
+from nearopt.parallel import beside, cores, in_child, in_children, in_parallel
 
 
 def test_forked_tasks_give_the_same_results_in_order() -> None:
@@ -31,6 +32,29 @@ def test_forked_tasks_give_the_same_results_in_order() -> None:
     assert pids[0] == os.getpid()
     if cores() >= 2:
         assert len(set(pids)) == 3
+
+
+@pytest.mark.skipif(cores() < 2, reason="on one core the second task runs here after the first")
+def test_beside_runs_the_second_task_at_the_same_time_and_ends_it_when_unwanted() -> None:
+    """here in this process, there in another at the same time (two tasks of 0.3 s take ~0.3 s);
+    where here's result is not wanted, there's child is ended without waiting for it."""
+    began = time.perf_counter()
+    mine, theirs = beside(
+        lambda: (time.sleep(0.3), os.getpid())[1],
+        lambda: (time.sleep(0.3), os.getpid())[1],
+        lambda _: True,
+    )
+    assert mine == os.getpid() and theirs not in (None, os.getpid())
+    assert time.perf_counter() - began < 0.55
+    began = time.perf_counter()
+    mine, theirs = beside(lambda: 1, lambda: time.sleep(30.0), lambda _: False)
+    assert (mine, theirs) == (1, None) and time.perf_counter() - began < 5.0
+
+    def fails() -> None:
+        raise ValueError("no such thing")
+
+    with pytest.raises(nearopt.SolverError, match="the second run failed: ValueError"):
+        beside(lambda: 1, fails, lambda _: True, "the second run")
 
 
 @pytest.mark.skipif(cores() < 2, reason="on one core the tasks run here, their errors as they are")

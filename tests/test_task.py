@@ -204,9 +204,12 @@ def test_the_cli_plans_a_task_file_and_marks_the_segments(tmp_path: Path) -> Non
     t = np.array([float(r["t"]) for r in samples])
     segment = np.array([int(r["segment"]) for r in samples])
     np.testing.assert_array_equal(segment, np.where(t < first["t_end"], 1, 2))
-    k = int(np.argmin(np.abs(t - first["t_end"])))  # the sample nearest the stop: nearly still
-    qd = np.array([[float(samples[k][f"qd_{j}"]) for j in load("ur5").joint_names]])
-    assert np.abs(qd).max() < 0.05
+    # the samples beside the stop: still but for what their acceleration makes of the time to it
+    names = load("ur5").joint_names
+    for k in np.argsort(np.abs(t - first["t_end"]))[:2]:
+        qd = np.array([float(samples[k][f"qd_{j}"]) for j in names])
+        qdd = np.array([float(samples[k][f"qdd_{j}"]) for j in names])
+        assert np.all(np.abs(qd) <= 1.5 * np.abs(qdd) * abs(t[k] - first["t_end"]) + 1e-9)
     for args, message in (
         (["--qe", *map(str, UR5_GOAL)], "once"),
         (["--via", *map(str, UR5_PASS)], "--via applies"),

@@ -30,10 +30,12 @@ from ..cost import Cost, TimeCost, TorqueCost, check_cost
 from ..errors import (
     ConfigurationError,
     InfeasiblePathError,
+    NearoptError,
     SolverError,
     UnreachablePoseError,
 )
-from ..path import BSplinePath, Path
+from ..parallel import beside
+from ..path import BSplinePath, Path, StraightPath
 from ..robot import Robot
 from ..robot.kinematics import ToolPose, inverse_kinematics
 from ..timing import (
@@ -259,7 +261,7 @@ def _planned(
     if setup.duration is not None:
         line, start = _fast_enough(setup, line, start, via_s)
     initial = _time_first_path(setup, line, start)
-    outcome = _improve(setup, line, start, via_s, initial, callback, verbose)
+    outcome = _two_starts(setup, line, start, via_s, initial, callback, verbose)
     again = setup.max_iterations > 0 and outcome[1] is not StopReason.INTERRUPTED
     if again and setup.duration is not None and setup.method == Method.SCP:
         outcome = _from_free_plan(setup, line, start, via_s, outcome, callback, verbose)
@@ -287,7 +289,7 @@ def _from_free_plan(
     free = replace(setup, duration=None)
     try:  # (stage 2's coarser grid may time the path a little slower; the time may run out)
         first_free = _time_first_path(free, line, start)
-        plan_free = _improve(free, line, start, via_s, first_free, None, False)
+        plan_free = _two_starts(free, line, start, via_s, first_free, None, False)
         path = plan_free[0].trajectory.path
         if _fastest(setup, path) > setup.duration[0] or time.perf_counter() >= setup.deadline:
             return first
@@ -296,6 +298,95 @@ def _from_free_plan(
     except (InfeasiblePathError, SolverError, KeyboardInterrupt):
         return first  # (a Ctrl-C ends planning with the first plan)
     return _lower(first, second, first[3] + plan_free[3] + second[3], "without the duration")
+
+
+def _two_starts(
+    setup: Segment,
+    line: Path,
+    start: Path | None,
+    via_s: tuple[float, ...],
+    initial: TimingResult,
+    callback: Callable[[Iteration], None] | None,
+    verbose: bool,
+) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+    """Stage 2 from the first path and, where :func:`_continues`, from the path a coarse stage 2
+    under heavier torque weights finds (:func:`_heavier_path`, ``SCPOptions.continuation``), in
+    a forked child at the same time; stage 2 goes on from that path only where it is timed
+    under the cost itself below the first run's plan, and the lower J of the two runs is
+    returned."""
+    if not _continues(setup, start):
+        return _improve(setup, line, start, via_s, initial, callback, verbose)
+    first, found = beside(
+        lambda: _improve(setup, line, start, via_s, initial, callback, verbose),
+        lambda: _heavier_path(setup),
+        lambda outcome: (
+            outcome[1] is not StopReason.INTERRUPTED and time.perf_counter() < setup.deadline
+        ),
+        "stage 2 under heavier torque weights",
+    )
+    if found is None:
+        return first
+    path, spent = found
+    try:
+        timed = _time_first_path(setup, path, path)
+        if timed.J >= first[0].J:  # the first run's basin, or a worse one: no second run
+            return (*first[:3], first[3] + spent + 1, first[4])
+        second = _improve(setup, path, path, via_s, timed, callback, verbose)
+    except (InfeasiblePathError, SolverError):
+        return first
+    factor = setup.options.continuation  # type: ignore[union-attr]
+    spent += first[3] + 1 + second[3]
+    return _lower(first, second, spent, f"under {factor:g} times the torque weights")
+
+
+def _continues(setup: Segment, start: Path | None) -> bool:
+    """Whether :func:`_two_starts` runs the second start: stage 2 by SCP from the straight line
+    (no obstacles, via-points or moving ends), rest to rest, θe fixed, no duration and no jerk
+    limits, a torque cost with some weight > 0 and ``SCPOptions.continuation`` > 1."""
+    options, cost = setup.options, setup.cost
+    return (
+        setup.method == Method.SCP
+        and isinstance(options, SCPOptions)
+        and options.continuation > 1.0
+        and isinstance(cost, TorqueCost)
+        and bool(np.any(cost.torque_weights(setup.robot.n) > 0.0))
+        and start is None
+        and setup.max_iterations > 0
+        and setup.collisions is None
+        and not setup.vias
+        and setup.goal is None
+        and setup.duration is None
+        and all(v is None for v in setup.ends)
+        and not setup.robot.limits.smooth
+    )
+
+
+def _heavier_path(setup: Segment) -> tuple[BSplinePath, int] | None:
+    """The path of stage 2 from the straight line under the torque weights times
+    ``SCPOptions.continuation``, coarse (half the control points, a 32-segment grid, no
+    refinement), as a B-spline of the plan's own knots (its control points on that path at their
+    Greville abscissae), and the stage-1 solves spent; None where it fails."""
+    options: SCPOptions = setup.options  # type: ignore[assignment]
+    cost: TorqueCost = setup.cost  # type: ignore[assignment]
+    k = options.control_points
+    coarse = replace(
+        options, control_points=max(4, k // 2), grid=32, refinements=0, continuation=1.0
+    )
+    weights = options.continuation * cost.torque_weights(setup.robot.n)
+    heavy = replace(
+        setup, cost=TorqueCost(weights=weights), options=coarse, grid=min(setup.grid, 64)
+    )
+    line = StraightPath(setup.q0, setup.qe)
+    try:
+        outcome = _improve(heavy, line, None, (), _time_first_path(heavy, line, None), None, False)
+    except NearoptError:
+        return None
+    found = outcome[0].trajectory.path
+    breaks = knot_breaks(options, k)
+    sigma = BSplinePath.greville(k + 2, breaks)
+    points = found(sigma * found.s_end)
+    points[[0, -1]] = setup.q0, setup.qe
+    return BSplinePath(points, breaks), outcome[3] + 1
 
 
 def _lower(
@@ -1036,6 +1127,10 @@ def _check_method(
             value = getattr(options, name)
             if not (np.isfinite(value) and value > 0):
                 raise ConfigurationError(f"{name} must be a positive number, got {value}")
+        if not (is_number(options.continuation) and 1.0 <= options.continuation <= 1e6):
+            raise ConfigurationError(
+                f"continuation must be a number from 1 (off) to 1e6, got {options.continuation!r}"
+            )
         refinements = options.refinements
         if isinstance(refinements, bool) or not (
             isinstance(refinements, int | np.integer) and 0 <= refinements <= 3
