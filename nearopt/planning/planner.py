@@ -364,13 +364,18 @@ def _continues(setup: Segment, start: Path | None) -> bool:
 def _heavier_path(setup: Segment) -> tuple[BSplinePath, int] | None:
     """The path of stage 2 from the straight line under the torque weights times
     ``SCPOptions.continuation``, coarse (half the control points, a 32-segment grid, no
-    refinement), as a B-spline of the plan's own knots (its control points on that path at their
+    refinement, four times the first trust radius), as a B-spline of the plan's own knots (its control points on that path at their
     Greville abscissae), and the stage-1 solves spent; None where it fails."""
     options: SCPOptions = setup.options  # type: ignore[assignment]
     cost: TorqueCost = setup.cost  # type: ignore[assignment]
     k = options.control_points
     coarse = replace(
-        options, control_points=max(4, k // 2), grid=32, refinements=0, continuation=1.0
+        options,
+        control_points=max(4, k // 2),
+        grid=32,
+        refinements=0,
+        continuation=1.0,
+        trust_radius=4.0 * options.trust_radius,  # it explores: ur5, 25 iterations instead of 201
     )
     weights = options.continuation * cost.torque_weights(setup.robot.n)
     heavy = replace(
