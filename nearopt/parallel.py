@@ -12,7 +12,9 @@ from __future__ import annotations
 import gc
 import os
 import pickle
+import select
 import signal
+import time
 from collections.abc import Callable, Sequence
 from typing import TypeVar
 
@@ -86,12 +88,14 @@ def beside(
     there: Callable[[], U],
     wanted: Callable[[T], bool],
     what: str = "a parallel part of the plan",
+    deadline: float | None = None,
 ) -> tuple[T, U | None]:
     """``here()`` in this process while ``there()`` runs in a forked child; their results, the
-    child's None where ``wanted(here's result)`` is false (the child is then ended without
-    waiting for it: e.g. here was interrupted). One after the other in this process where
+    child's None where ``wanted(here's result)`` is false or the child has not answered by
+    ``deadline`` (``time.perf_counter()``; the child is then ended without waiting for it: e.g.
+    here was interrupted, or the child hangs). One after the other in this process where
     ``os.fork`` is missing or this process may run on one core only. Errors as
-    :func:`in_parallel`."""
+    :func:`in_parallel` (a child that dies: a :class:`~nearopt.SolverError`)."""
     if not hasattr(os, "fork") or cores() < 2:
         mine = here()
         return mine, there() if wanted(mine) else None
@@ -104,7 +108,27 @@ def beside(
     if not wanted(mine):
         _end(*child)
         return mine, None
+    try:
+        answered = deadline is None or _answers_by(child[1], deadline)
+    except BaseException:
+        _end(*child)
+        raise
+    if not answered:
+        _end(*child)
+        return mine, None
     return mine, _collect(*child, what)  # type: ignore[return-value]
+
+
+def _answers_by(read: int, deadline: float) -> bool:
+    """Whether the pipe ``read`` has something to read (the child's answer, or its end) by
+    ``deadline``."""
+    while True:
+        left = deadline - time.perf_counter()
+        if left <= 0.0:
+            return False
+        ready, _, _ = select.select([read], [], [], float(left) if left < 3600.0 else 3600.0)
+        if ready:
+            return True
 
 
 def in_child(task: Callable[[], T], what: str = "a parallel part of the plan") -> T:

@@ -66,3 +66,28 @@ def test_a_bad_continuation_is_refused(value: object) -> None:
     options = nearopt.SCPOptions(continuation=value)  # type: ignore[arg-type]
     with pytest.raises(nearopt.ConfigurationError, match="continuation must be"):
         nearopt.plan(load("ur5"), np.zeros(6), np.full(6, 0.3), COST, options=options)
+
+
+def test_under_a_duration_the_first_runs_path_is_kept_as_a_start() -> None:
+    """ur5, seed 12, t_e = 1.2 s: the second start's plan without the duration is slower (1.8 s)
+    and cannot meet T; stage 2 under T still starts from the first run's (it was dropped for the
+    lower of the two: J 3.42 against 3.17)."""
+    robot = load("ur5")
+    q0, qe = motion(robot, 12)
+    alone = nearopt.plan(robot, q0, qe, COST, duration=1.2, options=ALONE)
+    result = nearopt.plan(robot, q0, qe, COST, duration=1.2)
+    assert result.duration == pytest.approx(1.2, rel=1e-9, abs=0.0)
+    assert result.J <= alone.J * (1 + 1e-9), (result.J, alone.J)
+
+
+def test_a_duration_limit_binds_where_the_better_motion_is_slower() -> None:
+    """ur5, seed 1, t_e ≤ 1.5 s: the cheapest motion without a limit takes 1.72 s; below it the
+    plan at t_e = 1.5 s (J 2.18) is the answer, not the fast one of 0.74 s (J 2.71)."""
+    robot = load("ur5")
+    q0, qe = motion(robot, 1)
+    result = nearopt.plan(robot, q0, qe, COST, max_duration=1.5)
+    exact = nearopt.plan(robot, q0, qe, COST, duration=1.5)
+    assert result.duration <= 1.5 * (1 + 1e-12)
+    assert result.J <= exact.J * (1 + 1e-9), (result.J, exact.J)
+    assert result.J < 0.9 * nearopt.plan(robot, q0, qe, COST, options=ALONE).J
+    assert nearopt.verify_plan(result).passed

@@ -287,17 +287,63 @@ def _from_free_plan(
     if time.perf_counter() >= setup.deadline:
         return first
     free = replace(setup, duration=None)
+    best, spent = first, first[3]
     try:  # (stage 2's coarser grid may time the path a little slower; the time may run out)
         first_free = _time_first_path(free, line, start)
-        plan_free = _two_starts(free, line, start, via_s, first_free, None, False)
-        path = plan_free[0].trajectory.path
-        if _fastest(setup, path) > setup.duration[0] or time.perf_counter() >= setup.deadline:
-            return first
-        initial = _time_first_path(setup, path, path)
-        second = _improve(setup, path, path, via_s, initial, callback, verbose)
+        plans_free, spent_free = _starts(free, line, start, via_s, first_free, None, False)
+        spent += spent_free
+        # from each free run's path (the second start's is slower: a T it cannot meet may be met
+        # by the first run's, a better start there; ur5 at T = 1.2 s: J 3.42 against 3.17)
+        for plan_free in plans_free:
+            path = plan_free[0].trajectory.path
+            if time.perf_counter() >= setup.deadline:
+                break
+            if _fastest(setup, path) > setup.duration[0]:
+                continue
+            initial = _time_first_path(setup, path, path)
+            second = _improve(setup, path, path, via_s, initial, callback, verbose)
+            spent += second[3]
+            best = _lower(best, second, spent, "without the duration")
+            if second[1] is StopReason.INTERRUPTED:
+                break
+        else:
+            best, spent = _binding(setup, plans_free, best, spent, via_s, callback, verbose)
     except (InfeasiblePathError, SolverError, KeyboardInterrupt):
-        return first  # (a Ctrl-C ends planning with the first plan)
-    return _lower(first, second, first[3] + plan_free[3] + second[3], "without the duration")
+        pass  # (a Ctrl-C ends planning with the best plan so far)
+    return (*best[:3], spent, best[4])
+
+
+def _binding(
+    setup: Segment,
+    plans_free: list[Outcome],
+    best: Outcome,
+    spent: int,
+    via_s: tuple[float, ...],
+    callback: Callable[[Iteration], None] | None,
+    verbose: bool,
+) -> tuple[Outcome, int]:
+    """Under t_e ≤ T, where a plan without the duration is lower than the best so far but
+    slower than T (its basin's optimum under the limit has t_e = T), stage 2 again under
+    t_e = T from the fastest-enough free path, and the lower J (ur5 at t_e ≤ 1.5 s: J 2.71 at
+    0.74 s, where the motion at 1.5 s costs 2.18)."""
+    limit, exact = setup.duration  # type: ignore[misc]
+    slower = [p for p in plans_free if p[0].J < best[0].J and p[0].duration > limit]
+    if exact or not slower or time.perf_counter() >= setup.deadline:
+        return best, spent
+    at = replace(setup, duration=(limit, True))
+    for plan_free in sorted(plans_free, key=lambda p: p[0].J):
+        path = plan_free[0].trajectory.path
+        if _fastest(setup, path) <= limit:
+            initial = _time_first_path(at, path, path)
+            second = _improve(at, path, path, via_s, initial, callback, verbose)
+            spent += second[3]
+            return _lower(best, second, spent, f"at t_e = {limit:g} s"), spent
+    return best, spent
+
+
+Outcome = tuple[TimingResult, StopReason, str, int, list[Iteration]]
+"""A stage-2 run's outcome: the timing, why it stopped, the message, the stage-1 solves spent and
+the accepted iterates."""
 
 
 def _two_starts(
@@ -308,35 +354,73 @@ def _two_starts(
     initial: TimingResult,
     callback: Callable[[Iteration], None] | None,
     verbose: bool,
-) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+) -> Outcome:
+    """The lower J of :func:`_starts`' runs, with the stage-1 solves spent by all."""
+    runs, spent = _starts(setup, line, start, via_s, initial, callback, verbose)
+    if len(runs) == 1:
+        return (*runs[0][:3], spent, runs[0][4])
+    factor = setup.options.continuation  # type: ignore[union-attr]
+    return _lower(runs[0], runs[1], spent, f"under {factor:g} times the torque weights")
+
+
+def _starts(
+    setup: Segment,
+    line: Path,
+    start: Path | None,
+    via_s: tuple[float, ...],
+    initial: TimingResult,
+    callback: Callable[[Iteration], None] | None,
+    verbose: bool,
+) -> tuple[list[Outcome], int]:
     """Stage 2 from the first path and, where :func:`_continues`, from the path a coarse stage 2
     under heavier torque weights finds (:func:`_heavier_path`, ``SCPOptions.continuation``), in
-    a forked child at the same time; stage 2 goes on from that path only where it is timed
-    under the cost itself below the first run's plan, and the lower J of the two runs is
-    returned."""
+    a forked child at the same time (each run with the whole iteration budget); stage 2 goes on
+    from that path only where it is timed under the cost itself below the first run's plan.
+    Returns the runs (the first run's first) and the stage-1 solves spent. The second start
+    never costs the first run's plan: where its child fails, dies or outlasts the time limit,
+    the first run's plan stands; a Ctrl-C while it finishes returns that plan, interrupted."""
     if not _continues(setup, start):
-        return _improve(setup, line, start, via_s, initial, callback, verbose)
-    first, found = beside(
-        lambda: _improve(setup, line, start, via_s, initial, callback, verbose),
-        lambda: _heavier_path(setup),
-        lambda outcome: (
-            outcome[1] is not StopReason.INTERRUPTED and time.perf_counter() < setup.deadline
-        ),
-        "stage 2 under heavier torque weights",
-    )
-    if found is None:
-        return first
-    path, spent = found
+        run = _improve(setup, line, start, via_s, initial, callback, verbose)
+        return [run], run[3]
+    done: list[Outcome] = []
+
+    def here() -> Outcome:
+        done.append(_improve(setup, line, start, via_s, initial, callback, verbose))
+        return done[0]
+
     try:
+        first, found = beside(
+            here,
+            lambda: _heavier_path(setup),
+            lambda outcome: (
+                outcome[1] is not StopReason.INTERRUPTED and time.perf_counter() < setup.deadline
+            ),
+            "stage 2 under heavier torque weights",
+            deadline=setup.deadline + SECOND_START_GRACE,
+        )
+        if found is None:
+            return [first], first[3]
+        path, spent = found
+        spent += first[3] + 1
         timed = _time_first_path(setup, path, path)
         if timed.J >= first[0].J:  # the first run's basin, or a worse one: no second run
-            return (*first[:3], first[3] + spent + 1, first[4])
+            return [first], spent
         second = _improve(setup, path, path, via_s, timed, callback, verbose)
-    except (InfeasiblePathError, SolverError):
-        return first
-    factor = setup.options.continuation  # type: ignore[union-attr]
-    spent += first[3] + 1 + second[3]
-    return _lower(first, second, spent, f"under {factor:g} times the torque weights")
+    except KeyboardInterrupt:
+        if not done:
+            raise
+        note = "; interrupted while the second start (heavier torque weights) ended"
+        return [(done[0][0], StopReason.INTERRUPTED, done[0][2] + note, *done[0][3:])], done[0][3]
+    except (InfeasiblePathError, SolverError):  # the child's failure, or its path's
+        if not done:
+            raise
+        return [done[0]], done[0][3]
+    return [first, second], spent + second[3]
+
+
+SECOND_START_GRACE = 1.0
+"""[s] How long past the time limit a plan waits for its second start's child (which stops
+at the time limit itself, within an iteration) before it ends it."""
 
 
 def _continues(setup: Segment, start: Path | None) -> bool:
@@ -364,8 +448,9 @@ def _continues(setup: Segment, start: Path | None) -> bool:
 def _heavier_path(setup: Segment) -> tuple[BSplinePath, int] | None:
     """The path of stage 2 from the straight line under the torque weights times
     ``SCPOptions.continuation``, coarse (half the control points, a 32-segment grid, no
-    refinement, four times the first trust radius), as a B-spline of the plan's own knots (its control points on that path at their
-    Greville abscissae), and the stage-1 solves spent; None where it fails."""
+    refinement, four times the first trust radius), as a B-spline of the plan's own knots (its
+    control points on that path at their Greville abscissae), and the stage-1 solves spent;
+    None where it fails (KeyboardInterrupt where it was interrupted)."""
     options: SCPOptions = setup.options  # type: ignore[assignment]
     cost: TorqueCost = setup.cost  # type: ignore[assignment]
     k = options.control_points
@@ -384,14 +469,16 @@ def _heavier_path(setup: Segment) -> tuple[BSplinePath, int] | None:
     line = StraightPath(setup.q0, setup.qe)
     try:
         outcome = _improve(heavy, line, None, (), _time_first_path(heavy, line, None), None, False)
+        if outcome[1] is StopReason.INTERRUPTED:  # (run here, on one core: the plan ends)
+            raise KeyboardInterrupt
+        found = outcome[0].trajectory.path
+        breaks = knot_breaks(options, k)
+        sigma = BSplinePath.greville(k + 2, breaks)
+        points = found(sigma * found.s_end)
+        points[[0, -1]] = setup.q0, setup.qe
+        return BSplinePath(points, breaks), outcome[3] + 1
     except NearoptError:
         return None
-    found = outcome[0].trajectory.path
-    breaks = knot_breaks(options, k)
-    sigma = BSplinePath.greville(k + 2, breaks)
-    points = found(sigma * found.s_end)
-    points[[0, -1]] = setup.q0, setup.qe
-    return BSplinePath(points, breaks), outcome[3] + 1
 
 
 def _lower(
