@@ -9,6 +9,7 @@ the way in.
 
 from __future__ import annotations
 
+import ctypes
 import gc
 import os
 import pickle
@@ -144,8 +145,10 @@ def _fork(task: Callable[[], object]) -> tuple[int, int]:
     """Start ``task`` in a forked child that writes its pickled outcome to a pipe; returns the
     child's pid and the pipe's end to read."""
     read, write = os.pipe()
+    parent = os.getpid()
     pid = os.fork()
     if pid == 0:  # the child: run, reply, exit without this process's clean-up
+        _die_with(parent)
         gc.freeze()  # the parent's objects stay out of the child's garbage collections
         os.close(read)
         try:
@@ -157,6 +160,19 @@ def _fork(task: Callable[[], object]) -> tuple[int, int]:
         os._exit(0)
     os.close(write)
     return pid, read
+
+
+def _die_with(parent: int) -> None:
+    """In a forked child: be killed when the parent ends (Linux's PR_SET_PDEATHSIG), and end
+    now if it already has. A child that outlived a killed parent (a batch's pool worker ended by
+    its pool) kept the parent's pipes open, and the pool waited for it forever."""
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG = 1
+    except (OSError, AttributeError):  # not Linux: the child may outlive its parent
+        return
+    if os.getppid() != parent:
+        os._exit(1)
 
 
 def _error(exc: BaseException) -> bytes:

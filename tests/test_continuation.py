@@ -32,10 +32,16 @@ def test_the_heavier_start_finds_a_slower_motion_a_quarter_cheaper() -> None:
     robot = load("ur5")
     q0, qe = motion(robot, 1)
     alone = nearopt.plan(robot, q0, qe, COST, options=ALONE)
-    result = nearopt.plan(robot, q0, qe, COST)
+    seen: list[nearopt.Iteration] = []
+    result = nearopt.plan(robot, q0, qe, COST, callback=seen.append)
     assert result.J <= 0.8 * alone.J, (result.J, alone.J)
     assert result.duration > 1.5 * alone.duration
     assert "under 3 times the torque weights" in result.message
+    # the history: the first run's iterates, then the second's from the heavier start's path
+    assert [it.index for it in seen] == [it.index for it in result.history]
+    assert [it.index for it in result.history] == list(range(len(result.history)))
+    assert [it.alpha is None for it in result.history].count(True) == 2
+    assert np.all(np.diff([it.J for it in result.history]) < 0.0)
     assert_independent_checks(robot, result.trajectory, COST, result.J, q0, qe)
 
 

@@ -355,12 +355,17 @@ def _two_starts(
     callback: Callable[[Iteration], None] | None,
     verbose: bool,
 ) -> Outcome:
-    """The lower J of :func:`_starts`' runs, with the stage-1 solves spent by all."""
+    """The lower J of :func:`_starts`' runs, with the stage-1 solves spent by all; where the
+    second is lower, the history is the first run's iterates followed by the second's (its first
+    entry, α None, the heavier start's path: J falls all along, as the callback saw it)."""
     runs, spent = _starts(setup, line, start, via_s, initial, callback, verbose)
-    if len(runs) == 1:
-        return (*runs[0][:3], spent, runs[0][4])
+    first = runs[0]
+    if len(runs) == 1 or runs[1][0].J >= first[0].J:
+        return (*first[:3], spent, first[4])
+    second = runs[1]
     factor = setup.options.continuation  # type: ignore[union-attr]
-    return _lower(runs[0], runs[1], spent, f"under {factor:g} times the torque weights")
+    note = f"{second[2]}; from the plan under {factor:g} times the torque weights"
+    return (second[0], second[1], note, spent, first[4] + second[4])
 
 
 def _starts(
@@ -405,7 +410,15 @@ def _starts(
         timed = _time_first_path(setup, path, path)
         if timed.J >= first[0].J:  # the first run's basin, or a worse one: no second run
             return [first], spent
-        second = _improve(setup, path, path, via_s, timed, callback, verbose)
+        offset = len(first[4])  # its iterates numbered on from the first run's
+
+        def follow(entry: Iteration) -> None:
+            if callback is not None:
+                callback(replace(entry, index=entry.index + offset))
+
+        second = _improve(setup, path, path, via_s, timed, follow, verbose)
+        moved = [replace(entry, index=entry.index + offset) for entry in second[4]]
+        second = (*second[:4], moved)
     except KeyboardInterrupt:
         if not done:
             raise
@@ -425,8 +438,9 @@ at the time limit itself, within an iteration) before it ends it."""
 
 def _continues(setup: Segment, start: Path | None) -> bool:
     """Whether :func:`_two_starts` runs the second start: stage 2 by SCP from the straight line
-    (no obstacles, via-points or moving ends), rest to rest, θe fixed, no duration and no jerk
-    limits, a torque cost with some weight > 0 and ``SCPOptions.continuation`` > 1."""
+    (no obstacles, via-points or moving ends), rest to rest, θe fixed, no duration, a torque cost
+    with some weight > 0 and ``SCPOptions.continuation`` > 1 (under jerk limits too: the phase
+    under them starts from the lower run's path)."""
     options, cost = setup.options, setup.cost
     return (
         setup.method == Method.SCP
@@ -441,7 +455,6 @@ def _continues(setup: Segment, start: Path | None) -> bool:
         and setup.goal is None
         and setup.duration is None
         and all(v is None for v in setup.ends)
-        and not setup.robot.limits.smooth
     )
 
 
