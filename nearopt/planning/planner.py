@@ -261,7 +261,7 @@ def _planned(
     if setup.duration is not None:
         line, start = _fast_enough(setup, line, start, via_s)
     initial = _time_first_path(setup, line, start)
-    outcome = _two_starts(setup, line, start, via_s, initial, callback, verbose)
+    outcome = _lowest(setup, *_starts(setup, line, start, via_s, initial, callback, verbose))
     again = setup.max_iterations > 0 and outcome[1] is not StopReason.INTERRUPTED
     if again and setup.duration is not None and setup.method == Method.SCP:
         outcome = _from_free_plan(setup, line, start, via_s, outcome, callback, verbose)
@@ -346,19 +346,10 @@ Outcome = tuple[TimingResult, StopReason, str, int, list[Iteration]]
 the accepted iterates."""
 
 
-def _two_starts(
-    setup: Segment,
-    line: Path,
-    start: Path | None,
-    via_s: tuple[float, ...],
-    initial: TimingResult,
-    callback: Callable[[Iteration], None] | None,
-    verbose: bool,
-) -> Outcome:
-    """The lower J of :func:`_starts`' runs, with the stage-1 solves spent by all; where the
+def _lowest(setup: Segment, runs: list[Outcome], spent: int) -> Outcome:
+    """The lower J of :func:`_starts`' runs, with the stage-1 solves ``spent`` by all; where the
     second is lower, the history is the first run's iterates followed by the second's (its first
     entry, α None, the heavier start's path: J falls all along, as the callback saw it)."""
-    runs, spent = _starts(setup, line, start, via_s, initial, callback, verbose)
     first = runs[0]
     if len(runs) == 1 or runs[1][0].J >= first[0].J:
         return (*first[:3], spent, first[4])
@@ -437,7 +428,7 @@ at the time limit itself, within an iteration) before it ends it."""
 
 
 def _continues(setup: Segment, start: Path | None) -> bool:
-    """Whether :func:`_two_starts` runs the second start: stage 2 by SCP from the straight line
+    """Whether :func:`_starts` runs the second start: stage 2 by SCP from the straight line
     (no obstacles, via-points or moving ends), rest to rest, θe fixed, no duration, a torque cost
     with some weight > 0 and ``SCPOptions.continuation`` > 1 (under jerk limits too: the phase
     under them starts from the lower run's path)."""
