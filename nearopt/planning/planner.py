@@ -404,10 +404,13 @@ def _starts(
         offset = len(first[4])  # its iterates numbered on from the first run's
 
         def follow(entry: Iteration) -> None:
+            moved = replace(entry, index=entry.index + offset)
+            if verbose:
+                print(_format(moved), flush=True)
             if callback is not None:
-                callback(replace(entry, index=entry.index + offset))
+                callback(moved)
 
-        second = _improve(setup, path, path, via_s, timed, follow, verbose)
+        second = _improve(setup, path, path, via_s, timed, follow, False)
         moved = [replace(entry, index=entry.index + offset) for entry in second[4]]
         second = (*second[:4], moved)
     except KeyboardInterrupt:
