@@ -252,9 +252,14 @@ def plan(
     return _result(setup, timing, initial, history, (reason, message), evaluations, via_s)
 
 
+Outcome = tuple[TimingResult, StopReason, str, int, list[Iteration]]
+"""A stage-2 run's outcome: the timing, why it stopped, the message, the stage-1 solves spent and
+the accepted iterates."""
+
+
 def _planned(
     setup: Segment, callback: Callable[[Iteration], None] | None, verbose: bool
-) -> tuple[TimingResult, tuple[TimingResult, StopReason, str, int, list[Iteration]], tuple]:
+) -> tuple[TimingResult, Outcome, tuple]:
     """The checked request planned: the first path timed, stage 2's outcome (the better of the
     runs it takes) and the via-points' σ."""
     line, start, via_s = first_path(setup)
@@ -276,10 +281,10 @@ def _from_free_plan(
     line: Path,
     start: Path | None,
     via_s: tuple[float, ...],
-    first: tuple[TimingResult, StopReason, str, int, list[Iteration]],
+    first: Outcome,
     callback: Callable[[Iteration], None] | None,
     verbose: bool,
-) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+) -> Outcome:
     """Under a duration, stage 2 again from the plan without it, where that path can be as
     fast as T, and the lower J of the two runs: stage 2 finds local optima, and for a T near
     or beyond the free plan's t_e its path is a better start than the first path (a ur5
@@ -294,12 +299,14 @@ def _from_free_plan(
         spent += spent_free
         # from each free run's path (the second start's is slower: a T it cannot meet may be met
         # by the first run's, a better start there; ur5 at T = 1.2 s: J 3.42 against 3.17)
+        fits = []  # the free runs whose path can be as fast as T
         for plan_free in plans_free:
             path = plan_free[0].trajectory.path
             if time.perf_counter() >= setup.deadline:
                 break
             if _fastest(setup, path) > setup.duration[0]:
                 continue
+            fits.append(plan_free)
             initial = _time_first_path(setup, path, path)
             second = _improve(setup, path, path, via_s, initial, callback, verbose)
             spent += second[3]
@@ -307,7 +314,7 @@ def _from_free_plan(
             if second[1] is StopReason.INTERRUPTED:
                 break
         else:
-            best, spent = _binding(setup, plans_free, best, spent, via_s, callback, verbose)
+            best, spent = _binding(setup, plans_free, fits, (best, spent), via_s, callback, verbose)
     except (InfeasiblePathError, SolverError, KeyboardInterrupt):
         pass  # (a Ctrl-C ends planning with the best plan so far)
     return (*best[:3], spent, best[4])
@@ -316,34 +323,28 @@ def _from_free_plan(
 def _binding(
     setup: Segment,
     plans_free: list[Outcome],
-    best: Outcome,
-    spent: int,
+    fits: list[Outcome],
+    so_far: tuple[Outcome, int],
     via_s: tuple[float, ...],
     callback: Callable[[Iteration], None] | None,
     verbose: bool,
 ) -> tuple[Outcome, int]:
     """Under t_e ≤ T, where a plan without the duration is lower than the best so far but
     slower than T (its basin's optimum under the limit has t_e = T), stage 2 again under
-    t_e = T from the fastest-enough free path, and the lower J (ur5 at t_e ≤ 1.5 s: J 2.71 at
-    0.74 s, where the motion at 1.5 s costs 2.18)."""
+    t_e = T from the lowest free path that ``fits`` (can be as fast as T), and the lower J with
+    the stage-1 solves spent (ur5 at t_e ≤ 1.5 s: J 2.71 at 0.74 s, where the motion at 1.5 s
+    costs 2.18)."""
+    best, spent = so_far
     limit, exact = setup.duration  # type: ignore[misc]
     slower = [p for p in plans_free if p[0].J < best[0].J and p[0].duration > limit]
-    if exact or not slower or time.perf_counter() >= setup.deadline:
+    if exact or not slower or not fits or time.perf_counter() >= setup.deadline:
         return best, spent
     at = replace(setup, duration=(limit, True))
-    for plan_free in sorted(plans_free, key=lambda p: p[0].J):
-        path = plan_free[0].trajectory.path
-        if _fastest(setup, path) <= limit:
-            initial = _time_first_path(at, path, path)
-            second = _improve(at, path, path, via_s, initial, callback, verbose)
-            spent += second[3]
-            return _lower(best, second, spent, f"at t_e = {limit:g} s"), spent
-    return best, spent
-
-
-Outcome = tuple[TimingResult, StopReason, str, int, list[Iteration]]
-"""A stage-2 run's outcome: the timing, why it stopped, the message, the stage-1 solves spent and
-the accepted iterates."""
+    path = min(fits, key=lambda p: p[0].J)[0].trajectory.path
+    initial = _time_first_path(at, path, path)
+    second = _improve(at, path, path, via_s, initial, callback, verbose)
+    spent += second[3]
+    return _lower(best, second, spent, f"at t_e = {limit:g} s"), spent
 
 
 def _lowest(setup: Segment, runs: list[Outcome], spent: int) -> Outcome:
@@ -489,11 +490,11 @@ def _heavier_path(setup: Segment) -> tuple[BSplinePath, int] | None:
 
 
 def _lower(
-    first: tuple[TimingResult, StopReason, str, int, list[Iteration]],
-    second: tuple[TimingResult, StopReason, str, int, list[Iteration]],
+    first: Outcome,
+    second: Outcome,
     spent: int,
     plan: str,
-) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+) -> Outcome:
     """The run of lower J, with the stage-1 solves ``spent`` by all; the second's message says
     it started from "the plan ``plan``"."""
     if second[0].J < first[0].J:
@@ -504,10 +505,10 @@ def _lower(
 def _from_rest_plan(
     setup: Segment,
     via_s: tuple[float, ...],
-    first: tuple[TimingResult, StopReason, str, int, list[Iteration]],
+    first: Outcome,
     callback: Callable[[Iteration], None] | None,
     verbose: bool,
-) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+) -> Outcome:
     """With nearly resting moving ends (:func:`~nearopt.planning.start.resting_ends`), stage 2
     again from the plan from rest to rest, its path turned onto the ends' directions
     (:func:`~nearopt.planning.ends.turned_onto`), and the lower J of the two runs. From the
@@ -778,7 +779,7 @@ def _improve(
     initial: TimingResult,
     callback: Callable[[Iteration], None] | None,
     verbose: bool,
-) -> tuple[TimingResult, StopReason, str, int, list[Iteration]]:
+) -> Outcome:
     """Stage 2 from the first path (or none, ``max_iterations = 0``): the timing returned, why
     it stopped, the message, the stage-1 solves spent and the accepted iterates."""
     robot, q0, qe, cost, goal = setup.robot, setup.q0, setup.qe, setup.cost, setup.goal
