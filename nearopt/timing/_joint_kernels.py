@@ -69,14 +69,16 @@ def assemble(
     indptr, indices, data, lo, hi, fin_lo, fin_hi,
     e_mat, e_rhs,
     t_count, t_scale, u0, t_weight, t_seg, ds, z_scale, lam_ends, lin, f_scale, nz,
-    group_start, group_rows, position, newton, grad, r_hi, r_lo, r_e, r_d,
+    group_start, group_rows, gram, newton, grad, r_hi, r_lo, r_e, r_d,
 ):  # fmt: skip  # pragma: no cover - compiled
     """F, the residuals (into r_hi, r_lo, r_e, r_d), ∇F (into grad) and the Newton matrix
     ∇²F + Σ_r (y/s)_r a_r a_rᵀ (into ``newton``, zeroed here: its lower band in the order of
-    ``position``, see :func:`_add`); returns
+    ``position``, see :func:`_add`; ``gram``: :func:`gram_plan`'s arrays, the position first);
+    returns
     (F, Σ s y, the largest row residual, the largest |r_d|)."""
     big_n = ds.size
     m = indptr.size - 1
+    position = gram[0]
     ax = _row_values(indptr, indices, data, x)
     lam, dl, d2l = _lambdas(x, z_scale, nz)
     y = np.empty(big_n)
@@ -123,60 +125,97 @@ def assemble(
                 _add_cross(newton, position, c, k - 1, mixed * data[a] * dl[k - 1])
             if k < nz:
                 _add_cross(newton, position, c, k, mixed * data[a] * dl[k])
-    _gram(indptr, indices, data, d, group_start, group_rows, position, newton)
+    _gram(d, group_start, group_rows, gram, newton.reshape(-1))
     return _residuals(
         x, nu, s_hi, s_lo, y_hi, y_lo, indptr, indices, data, ax, lo, hi, fin_lo, fin_hi,
         e_mat, e_rhs, grad, r_hi, r_lo, r_e, r_d, f,
     )  # fmt: skip
 
 
-@inline_jit(error_model="numpy")
-def _gram(indptr, indices, data, d, group_start, group_rows, position, out):  # pragma: no cover
-    """out += Σ_r d_r a_r a_rᵀ in the lower band, the rows taken in groups (rows of a group
-    share most of their columns: their sum is formed densely on the union of their columns,
-    then added once)."""
+@cached_jit(error_model="numpy")
+def gram_plan(indptr, indices, data, group_start, group_rows, position):  # pragma: no cover
+    """What Σ_r d_r a_r a_rᵀ needs of the rows, which do not change while one problem is
+    solved (only d does): per group of rows (rows of a group share most of their columns), the
+    union of its rows' columns (``count`` of them), its rows densely on that union (``dense``,
+    group g's rows × count from ``dense_start[g]``) and where each entry of the union's lower
+    triangle lies in the Newton matrix's lower band held flat (``flat``, from
+    ``flat_start[g]``; see :func:`_add`). Returns (position, count, dense_start, dense,
+    flat_start, flat)."""
     nx = position.size
+    groups = group_start.size - 1
     local = np.full(nx, -1)  # a column's place in the group's union
     columns = np.empty(nx, dtype=np.int64)
-    widest, union = 1, 1  # the most rows of a group, the most columns a group's rows can have
-    for g in range(group_start.size - 1):
-        widest = max(widest, group_start[g + 1] - group_start[g])
-        entries = 0
-        for e in range(group_start[g], group_start[g + 1]):
-            entries += indptr[group_rows[e] + 1] - indptr[group_rows[e]]
-        union = max(union, min(entries, nx))
-    dense = np.zeros((widest, union))
-    block = np.zeros((union, union))
-    for g in range(group_start.size - 1):
+    count = np.zeros(groups, dtype=np.int64)
+    for g in range(groups):
         first, end = group_start[g], group_start[g + 1]
-        if end - first == 1:
-            _gram_row(indptr, indices, data, d, group_rows[first], position, out)
-            continue
-        count = 0
-        for e in range(first, end):
-            r = group_rows[e]
-            for a in range(indptr[r], indptr[r + 1]):
-                if local[indices[a]] < 0:
-                    local[indices[a]] = count
-                    columns[count] = indices[a]
-                    count += 1
+        count[g] = _union(indptr, indices, first, end, group_rows, local, columns)
+        for a in range(count[g]):
+            local[columns[a]] = -1
+    dense_start = np.zeros(groups + 1, dtype=np.int64)
+    flat_start = np.zeros(groups + 1, dtype=np.int64)
+    for g in range(groups):
+        rows = group_start[g + 1] - group_start[g]
+        dense_start[g + 1] = dense_start[g] + rows * count[g]
+        flat_start[g + 1] = flat_start[g] + count[g] * (count[g] + 1) // 2
+    dense = np.zeros(dense_start[groups])
+    flat = np.empty(flat_start[groups], dtype=np.int64)
+    for g in range(groups):
+        first, end, c = group_start[g], group_start[g + 1], count[g]
+        _union(indptr, indices, first, end, group_rows, local, columns)
         for e in range(end - first):
-            dense[e, :count] = 0.0
             r = group_rows[first + e]
             for a in range(indptr[r], indptr[r + 1]):
-                dense[e, local[indices[a]]] = data[a]
-        for a in range(count):
+                dense[dense_start[g] + e * c + local[indices[a]]] = data[a]
+        k = flat_start[g]
+        for a in range(c):
+            pa = position[columns[a]]
+            for b in range(a + 1):
+                pb = position[columns[b]]
+                flat[k] = (pa - pb) * nx + pb if pa >= pb else (pb - pa) * nx + pa
+                k += 1
+        for a in range(c):
+            local[columns[a]] = -1
+    return position, count, dense_start, dense, flat_start, flat
+
+
+@inline_jit(error_model="numpy")
+def _union(indptr, indices, first, end, group_rows, local, columns):  # pragma: no cover
+    """The columns of rows group_rows[first:end] in order of first appearance (into
+    ``columns``, their places into ``local``); returns their count."""
+    count = 0
+    for e in range(first, end):
+        r = group_rows[e]
+        for a in range(indptr[r], indptr[r + 1]):
+            if local[indices[a]] < 0:
+                local[indices[a]] = count
+                columns[count] = indices[a]
+                count += 1
+    return count
+
+
+@inline_jit(error_model="numpy")
+def _gram(d, group_start, group_rows, gram, out):  # pragma: no cover - compiled
+    """out (the lower band, flat) += Σ_r d_r a_r a_rᵀ, group by group of :func:`gram_plan`:
+    each group's sum formed densely on its union of columns, then added once."""
+    _, count, dense_start, dense, flat_start, flat = gram
+    widest = 1
+    for g in range(count.size):
+        widest = max(widest, count[g])
+    block = np.zeros((widest, widest))
+    for g in range(count.size):
+        first, c = group_start[g], count[g]
+        for a in range(c):
             block[a, : a + 1] = 0.0
-        for e in range(end - first):
+        for e in range(group_start[g + 1] - first):
             dr = d[group_rows[first + e]]
             if dr != 0.0:
-                _rank_one(block, dense[e], dr, count)
-        for a in range(count):
-            ca = columns[a]
+                at = dense_start[g] + e * c
+                _rank_one(block, dense[at : at + c], dr, c)
+        k = flat_start[g]
+        for a in range(c):
             for b in range(a + 1):
-                _add(out, position, ca, columns[b], block[a, b])
-        for a in range(count):
-            local[columns[a]] = -1
+                out[flat[k]] += block[a, b]
+                k += 1
 
 
 @cached_jit(error_model="numpy", fastmath=True)
@@ -187,19 +226,6 @@ def _rank_one(block, row, weight, count):  # pragma: no cover - compiled
         if va != 0.0:
             for b in range(a + 1):
                 block[a, b] += va * row[b]
-
-
-@inline_jit(error_model="numpy")
-def _gram_row(indptr, indices, data, d, r, position, out):  # pragma: no cover - compiled
-    dr = d[r]
-    if dr == 0.0:
-        return
-    first, end = indptr[r], indptr[r + 1]
-    for a in range(first, end):
-        va = dr * data[a]
-        ia = indices[a]
-        for b in range(first, a + 1):
-            _add(out, position, ia, indices[b], va * data[b])
 
 
 @inline_jit(error_model="numpy")

@@ -203,6 +203,10 @@ class _Problem:
         self.sides = int(self.fin_lo.sum() + self.fin_hi.sum())
         self.f_scale = 1.0 / self.cost(self.start())
         self.band = _Band.of(self.mat, self.nz)
+        from . import _joint_kernels as kernels
+
+        csr = (self.mat.indptr, self.mat.indices, self.mat.data)
+        self.gram = kernels.gram_plan(*csr, self.group_start, self.group_rows, self.band.position)
 
     def start(self) -> NDArray[np.float64]:
         """x at the start: z at the model's timing, p = 0."""
@@ -422,8 +426,8 @@ def _iterate(pr: _Problem, tolerance: float, max_iterations: int) -> JointSoluti
     for iteration in range(1, max_iterations + 1):
         f, gap, worst, rd_max = kernels.assemble(
             st.x, st.nu, *sides, *csr, pr.lo, pr.hi, *finite, pr.e_dense, pr.e_rhs,
-            *energy, pr.f_scale, pr.nz, pr.group_start, pr.group_rows,
-            pr.band.position, w.newton, w.grad, w.r_hi, w.r_lo, w.r_e, w.r_d,
+            *energy, pr.f_scale, pr.nz, pr.group_start, pr.group_rows, pr.gram,
+            w.newton, w.grad, w.r_hi, w.r_lo, w.r_e, w.r_d,
         )  # fmt: skip
         if not (np.isfinite(f) and np.isfinite(gap) and np.isfinite(rd_max)):
             return _answer(pr, st, False, iteration, "the iterate is not finite")
