@@ -283,3 +283,40 @@ def test_the_refined_run_lowers_j(name: str) -> None:
     assert fine.J < coarse.J * (1 - 1e-4), (fine.J, coarse.J)
     assert fine.trajectory.path.control_points.shape[0] == 26
     assert nearopt.verify_plan(fine).passed
+
+
+@pytest.mark.parametrize(("arm", "weight"), [("ur5", 0.0), ("panda", 1e-3)])
+def test_the_models_floor_is_its_value_at_no_step(arm: str, weight: float) -> None:
+    """Stage 2's convex model at Δp = 0 (a zero trust region) is stage 1 without the rows
+    between the samples: model_floor gives its J without solving the model, at most the
+    iterate's own J (on a planned path, where they bind: 2–3e-4 below it), and the model with
+    room to move predicts no more than that."""
+    from nearopt.path import BSplinePath
+    from nearopt.planning.ends import MovingEnds
+    from nearopt.planning.scp import IterateParts, iterate_model, model_floor, solve_model
+
+    robot = load(arm)
+    rng = np.random.default_rng(3)
+    q0, qe = random_configuration(robot, rng), random_configuration(robot, rng)
+    cost = nearopt.TorqueCost(weight)
+    weights = cost.torque_weights(robot.n)
+    options = nearopt.SCPOptions(refinements=0, continuation=1.0)
+    path = nearopt.plan(robot, q0, qe, cost, options=options).trajectory.path  # limits bind
+    assert isinstance(path, BSplinePath)
+    timing = nearopt.optimal_timing(robot, path, cost, grid=64)
+    assert timing.problem.interior is not None  # the rows between the samples exist
+    disc = Discretisation.of(timing.problem)
+    z, p = timing.b[1:-1], path.control_points[1:-1].ravel()
+    ends = MovingEnds(None, None, q0, qe, 15, False)
+    scale = np.full(p.size, 0.05)
+    model = iterate_model(
+        robot, disc, z, path_basis(path, disc), p, IterateParts(timing, path), scale,
+        None, path, (), None, None, (ends, weights),
+    )  # fmt: skip
+    limits = (np.full(p.size, -np.inf), np.full(p.size, np.inf))
+    at_zero = solve_model(disc, weights, model, z, p, 0.0 * scale, *limits)
+    floor = model_floor(timing, weights)
+    assert floor < timing.objective * (1 - 1e-5)  # the rows between the samples bind
+    assert floor == pytest.approx(at_zero[1], rel=1e-6), (floor, at_zero[1], timing.objective)
+    moved = solve_model(disc, weights, model, z, p, scale, *limits)
+    assert moved[1] <= floor * (1 + 1e-7)
