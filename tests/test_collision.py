@@ -115,6 +115,33 @@ def test_distance_gradients_match_central_differences(name: str, rng: np.random.
     assert checked > 50
 
 
+@pytest.mark.parametrize("name", ARMS)
+def test_the_broad_phase_is_exact_below_its_level_and_a_lower_bound_above(
+    name: str, rng: np.random.Generator
+) -> None:
+    robot = load(name)
+    cm = CollisionModel(robot, CELL)
+    qs = np.array([random_configuration(robot, rng) for _ in range(40)])
+    exact = np.array([independent_distances(cm, q) for q in qs])
+    tol = 1e-6 + 1e-5 * np.abs(exact)  # GJK's (coal.distance's default request: relative)
+    for level in (0.0, 0.05, 0.2):
+        d = cm.distances_along(qs, level)
+        asked = d <= level
+        # coal's distances where asked, penetrations as penetrations (their depth is EPA's,
+        # which may give up: −inf-like values)
+        apart, into = asked & (exact > tol), asked & (exact < -tol)
+        assert np.all(np.abs(d - exact)[apart] <= tol[apart])
+        assert np.all(d[into] < 0.0)
+        # elsewhere a lower bound above the level: the bodies' boxes apart
+        assert np.all(d[~asked] > level)
+        assert np.all((d <= exact + tol)[~asked]), name
+        if level == 0.05:  # the boxes spare coal most pairs
+            assert np.mean(~asked) > 0.5, (name, np.mean(~asked))
+    # every pair is queried again afterwards (the broad phase deactivates pairs for a query)
+    apart = exact[-1] > 0.0
+    np.testing.assert_allclose(cm.distances(qs[-1])[apart], exact[-1][apart], rtol=1e-5, atol=1e-6)
+
+
 def test_collision_rows_of_a_rejected_step_reuse_the_paths_clearances() -> None:
     """Stage 2's clearance rows at the same path for a smaller step (a rejected step's model)
     from the clearances and gradients computed for the larger one: the same rows as computed

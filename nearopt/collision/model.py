@@ -239,6 +239,7 @@ class CollisionModel:
         self.motion_rates = self._motion_rates()
         """R_j of every pair: how fast its distance can change per unit of θ'_j [m/rad or
         m/m], shape (len(pairs), n) (see the module docstring)."""
+        self._boxes = _local_boxes(geom)
 
     # ------------------------------------------------------------------ queries
     def __repr__(self) -> str:
@@ -250,6 +251,25 @@ class CollisionModel:
     def distances(self, q: ArrayLike) -> NDArray[np.float64]:
         """Signed distance of every checked pair at θ [m], shape (len(pairs),)."""
         return self._all(self.robot.check_configuration(q))
+
+    def distances_along(
+        self, qs: ArrayLike, below: float | ArrayLike = np.inf
+    ) -> NDArray[np.float64]:
+        """Signed distances of every checked pair at each θ of ``qs`` [m], shape
+        (len(qs), len(pairs)): exact where they are at most ``below`` (one level, or one per
+        pair [m]); elsewhere a lower bound above ``below``, the distance between the two bodies'
+        bounding boxes (coal is asked only for the pairs whose boxes are that close: a broad
+        phase).
+
+        Parameters
+        ----------
+        qs
+            Configurations θ [rad or m], shape (S, n).
+        below
+            The level up to which distances are exact (default inf: all of them).
+        """
+        values, _ = self._bounded(self._configurations(qs), below)
+        return values
 
     def closest(self, q: ArrayLike) -> Contact:
         """The closest checked pair at θ (``distance`` inf when nothing is checked)."""
@@ -350,11 +370,11 @@ class CollisionModel:
         s_end = path.s_end
         s = np.linspace(0.0, s_end, samples + 1)
         q = path(s)
-        dist = np.array([self._all(x) for x in q])  # (S, P)
-        k_min = np.unravel_index(int(np.argmin(dist)), dist.shape) if dist.size else (0, 0)
-        checks = dist.size
-        if dist.size == 0:
+        if len(self._pairs) == 0:
             return Clearance(True, level, self.closest(q[0]), 0.0, 0)
+        dist, bound = self._first_pass(path, s, q, level)  # (S, P), (S − 1, P)
+        k_min = np.unravel_index(int(np.argmin(dist)), dist.shape)
+        checks = dist.size
 
         def contact(k: int, d: float, at: NDArray[np.float64]) -> Contact:
             self._all(at)
@@ -369,10 +389,7 @@ class CollisionModel:
                 False, level, contact(worst[2], worst[0], q[k_min[0]]), worst[1], checks
             )
         slope = _slope_bound(path)
-        # intervals (a, b, d_a, d_b) per pair, vectorised over the first pass
         rate = self.motion_rates  # (P, n): R_j of each pair's moving bodies
-        speeds = slope(s[:-1], s[1:])  # (S−1, n)
-        bound = speeds @ rate.T * np.diff(s)[:, None]  # (S−1, P)
         open_ = np.argwhere(dist[:-1] + dist[1:] - 2.0 * level < bound)
         # the open intervals, bisected level by level: each level's midpoints evaluated
         # together (the path in one call, the kinematics once per distinct midpoint, shared by
@@ -420,6 +437,45 @@ class CollisionModel:
         )
 
     # ------------------------------------------------------------------ internals
+    def _first_pass(
+        self,
+        path: JointPath,
+        s: NDArray[np.float64],
+        q: NDArray[np.float64],
+        level: float,
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+        """:meth:`path_clearance`'s uniform samples: the distances (S, P), exact wherever the
+        certificate looks at them (the smallest, and both ends of every interval it cannot
+        certify from them), lower bounds elsewhere; and the bound L (s_b − s_a) of every
+        interval and pair (S − 1, P; None for a path the bound does not cover)."""
+        try:
+            slope = _slope_bound(path)
+        except ConfigurationError:  # raised again where the certificate needs the bound
+            bound = None
+        else:
+            bound = slope(s[:-1], s[1:]) @ self.motion_rates.T * np.diff(s)[:, None]
+        dist, exact = self._bounded(q, level)
+        t0 = time.perf_counter()
+        while True:  # the smallest exactly: coal where a lower bound is below the least known
+            low = ~exact & (dist < np.min(dist, where=exact, initial=np.inf))
+            if not low.any():
+                break
+            if not exact.any():  # nothing known yet: the least bound first
+                low = np.zeros(exact.shape, dtype=bool)
+                low.flat[int(np.argmin(dist))] = True
+            self._exactly(q, low, dist)
+            exact |= low
+        if bound is not None and dist.min() >= level:  # (else not certified: no need)
+            # the intervals the bounds alone leave open: their ends exactly
+            open_ = dist[:-1] + dist[1:] - 2.0 * level < bound
+            ends = np.zeros(exact.shape, dtype=bool)
+            ends[:-1] |= open_
+            ends[1:] |= open_
+            ends &= ~exact
+            self._exactly(q, ends, dist)
+        self.seconds += time.perf_counter() - t0
+        return dist, bound
+
     def __reduce__(self) -> tuple[object, ...]:
         """Pickled as its arguments (coal's shapes are not picklable): rebuilt where it is
         unpickled, e.g. a plan sent back from a Dask worker."""
@@ -448,6 +504,74 @@ class CollisionModel:
         d = np.array([self._results[int(k)].min_distance for k in index])
         self.seconds += time.perf_counter() - t0
         return d
+
+    def _configurations(self, qs: ArrayLike) -> NDArray[np.float64]:
+        """qs as a float array of shape (S, n), or the error of its first bad row."""
+        a = np.asarray(qs, dtype=float)
+        n = self.robot.n
+        if a.ndim != 2 or a.shape[1] != n or not np.all(np.isfinite(a)):
+            for row in a.reshape(-1, a.shape[-1]) if a.ndim >= 1 else [a]:
+                self.robot.check_configuration(row)
+            raise ConfigurationError(f"configurations must have shape (S, {n}), got {a.shape}")
+        return a
+
+    def _bounded(
+        self, qs: NDArray[np.float64], below: float | ArrayLike
+    ) -> tuple[NDArray[np.float64], NDArray[np.bool_]]:
+        """:meth:`distances_along` and where its values are exact, shape (S, P) each."""
+        count = len(self._pairs)
+        below = np.broadcast_to(np.asarray(below, dtype=float), (count,))
+        if min(count, len(qs)) < BROAD_PHASE or not np.any(np.isfinite(below)):
+            values = np.array([self._all(q) for q in qs]).reshape(len(qs), count)
+            return values, np.ones(values.shape, dtype=bool)
+        t0 = time.perf_counter()
+        model, data, boxes = self.robot.model, self._data, self._boxes
+        centre = np.broadcast_to(boxes.centre, (len(qs), *boxes.centre.shape)).copy()  # (S, G, 3)
+        extent = np.broadcast_to(boxes.half, centre.shape).copy()
+        if boxes.joints.size:
+            frames = np.empty((len(qs), boxes.joints.size, 4, 4))
+            for i, q in enumerate(qs):
+                pin.forwardKinematics(model, data, q)
+                frames[i] = [data.oMi[int(j)].homogeneous for j in boxes.joints]
+            moving = boxes.moving
+            frame = frames[:, boxes.frame[moving]]  # (S, G', 4, 4)
+            rotation, translation = frame[..., :3, :3], frame[..., :3, 3]
+            with np.errstate(invalid="ignore"):  # an unbounded body: inf · 0
+                centre[:, moving] = np.einsum("sgij,gj->sgi", rotation, boxes.centre[moving])
+                centre[:, moving] += translation
+                extent[:, moving] = np.einsum("sgij,gj->sgi", np.abs(rotation), boxes.half[moving])
+        a, b = self._pairs[:, 0], self._pairs[:, 1]
+        with np.errstate(invalid="ignore"):
+            gap = np.abs(centre[:, a] - centre[:, b]) - extent[:, a] - extent[:, b]  # (S, P, 3)
+        # boxes apart bound the distance from below; overlapping ones (or unbounded) do not
+        apart = np.all(np.isfinite(gap), axis=2) & np.any(gap > 0.0, axis=2)
+        values = np.where(apart, np.linalg.norm(np.maximum(gap, 0.0), axis=2), -np.inf)
+        exact = values <= below
+        self._exactly(qs, exact, values)
+        self.seconds += time.perf_counter() - t0
+        return values, exact
+
+    def _exactly(
+        self, qs: NDArray[np.float64], where: NDArray[np.bool_], values: NDArray[np.float64]
+    ) -> None:
+        """coal's distances into ``values`` (S, P) where ``where``: at each configuration the
+        pairs asked for only, the others deactivated for the time of the query."""
+        rows = np.flatnonzero(where.any(axis=1))
+        if rows.size == 0:
+            return
+        model, data, geom, gdata = self.robot.model, self._data, self.geometry, self._gdata
+        a, b = self._pairs[:, 0], self._pairs[:, 1]
+        chosen = np.zeros((geom.ngeoms, geom.ngeoms), dtype=bool)
+        try:
+            for i in rows:
+                ks = np.flatnonzero(where[i])
+                chosen[:] = False
+                chosen[a[ks], b[ks]] = True
+                gdata.setActiveCollisionPairs(geom, chosen, True)
+                pin.computeDistances(model, data, geom, gdata, qs[i])
+                values[i, ks] = [self._results[k].min_distance for k in ks]
+        finally:
+            gdata.setActiveCollisionPairs(geom, np.ones(chosen.shape, dtype=bool), True)
 
     def _all(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
         if not self.geometry.collisionPairs:
@@ -508,6 +632,57 @@ class CollisionModel:
                 body = a if j in sa else b
                 rates[k, j - 1] = 1.0 if prismatic[j - 1] else reach(j, body)
         return rates
+
+
+BROAD_PHASE = 16
+"""Configurations and pairs from which :meth:`CollisionModel.distances_along` bounds the pairs
+by their bodies' boxes first (fewer of either: every pair exactly, which costs less than the
+boxes' set-up)."""
+
+
+@dataclass(frozen=True)
+class _Boxes:
+    """Every body's bounding box for the broad phase of :meth:`CollisionModel.distances_along`.
+
+    Attributes
+    ----------
+    joints
+        The joints the moving bodies are fixed to, shape (J,).
+    moving
+        The bodies on a joint, shape (G',).
+    frame
+        Each body's joint as an index into ``joints`` (−1: fixed to the base), shape (G,).
+    centre, half
+        Each box's centre and half-extents [m], in its joint's frame (the base's for a fixed
+        body), axis-aligned there; infinite half-extents for a half-space, or where coal gives
+        no finite box; shape (G, 3) each.
+    """
+
+    joints: NDArray[np.int64]
+    moving: NDArray[np.int64]
+    frame: NDArray[np.int64]
+    centre: NDArray[np.float64]
+    half: NDArray[np.float64]
+
+
+def _local_boxes(geom: pin.GeometryModel) -> _Boxes:
+    """The bodies' boxes (coal's local boxes, each placed in its joint's frame)."""
+    count = geom.ngeoms
+    centre, half = np.zeros((count, 3)), np.full((count, 3), np.inf)
+    parent = np.array([o.parentJoint for o in geom.geometryObjects], dtype=int)
+    for i, obj in enumerate(geom.geometryObjects):
+        g = obj.geometry
+        if isinstance(g, coal.Halfspace | coal.Plane):
+            continue
+        g.computeLocalAABB()
+        lo, hi = np.asarray(g.aabb_local.min_), np.asarray(g.aabb_local.max_)
+        if np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)):
+            m = obj.placement  # the body in its joint's frame
+            centre[i] = m.rotation @ (0.5 * (lo + hi)) + m.translation
+            half[i] = np.abs(m.rotation) @ (0.5 * (hi - lo))
+    joints = np.unique(parent[parent != 0])
+    frame = np.where(parent != 0, np.searchsorted(joints, parent), -1)
+    return _Boxes(joints, np.flatnonzero(parent != 0), frame, centre, half)
 
 
 def _slope_bound(path: JointPath):  # noqa: ANN202

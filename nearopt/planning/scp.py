@@ -585,7 +585,8 @@ def knot_breaks(
 class CollisionSamples:
     """The clearances along one path at ``checks`` uniform σ, and their gradients where
     :func:`collision_rows` asks for them, computed once: a rejected step's smaller model takes
-    them again (its path is the same)."""
+    them again (its path is the same). Exact up to m⁺ + :data:`ACTIVATION`, lower bounds beyond
+    (no row is kept there)."""
 
     def __init__(
         self, collisions: CollisionModel, path: BSplinePath, checks: int = 129, end: bool = False
@@ -594,7 +595,7 @@ class CollisionSamples:
         sigma = np.linspace(0.0, 1.0, checks)
         self.q = path(sigma)
         self.basis = path.basis(sigma)[:, 1 : None if end else -1]  # (S, K), or K + 1
-        self.dist = np.array([collisions.distances(x) for x in self.q])  # (S, P)
+        self.dist = collisions.distances_along(self.q, _inner(collisions.margin) + ACTIVATION)
         self._gradients: dict[int, tuple[NDArray[np.int64], NDArray, NDArray]] = {}
 
     def gradients(
@@ -636,7 +637,7 @@ def collision_rows(
         ``G Δp ≥ lower``, G of shape (rows, K·n) over the interior control points (point-major),
         (rows, (K + 1)·n) with the end point when ``end``.
     """
-    inner = collisions.margin + max(0.25 * collisions.margin, 1e-3)
+    inner = _inner(collisions.margin)
     if samples is None:
         samples = CollisionSamples(collisions, path, checks, end)
     q, basis, dist = samples.q, samples.basis, samples.dist
@@ -660,6 +661,11 @@ def collision_rows(
     if not blocks:
         return sp.csr_matrix((0, basis.shape[1] * q.shape[1])), np.zeros(0)
     return sp.csr_matrix(np.vstack(blocks)), np.concatenate(lower)
+
+
+def _inner(margin: float) -> float:
+    """m⁺ of :func:`collision_rows`: the clearance held at the checked points [m]."""
+    return margin + max(0.25 * margin, 1e-3)
 
 
 def _with_rows(
