@@ -340,7 +340,7 @@ class CollisionModel:
             )
             moved = self._moved_by[self._joint[self._pairs[index, side]]]  # (m, nv)
             # a point p of the body: nᵀ(v + ω × p) = nᵀv + (p × n)ᵀω over the joints moving it
-            grads += sign * moved * (normal @ jv + np.cross(points, normal) @ jw)
+            grads += sign * moved * (normal @ jv + _cross(points, normal) @ jw)
         return d, grads
 
     # ------------------------------------------------------------------ paths
@@ -683,6 +683,17 @@ def _local_boxes(geom: pin.GeometryModel) -> _Boxes:
     joints = np.unique(parent[parent != 0])
     frame = np.where(parent != 0, np.searchsorted(joints, parent), -1)
     return _Boxes(joints, np.flatnonzero(parent != 0), frame, centre, half)
+
+
+def _cross(a: NDArray[np.float64], b: NDArray[np.float64]) -> NDArray[np.float64]:
+    """a × b row by row, shapes (m, 3) (NumPy's ``cross`` costs ~30 µs at these sizes)."""
+    return np.column_stack(
+        [
+            a[:, 1] * b[:, 2] - a[:, 2] * b[:, 1],
+            a[:, 2] * b[:, 0] - a[:, 0] * b[:, 2],
+            a[:, 0] * b[:, 1] - a[:, 1] * b[:, 0],
+        ]
+    )
 
 
 def _slope_bound(path: JointPath):  # noqa: ANN202
