@@ -124,3 +124,10 @@ def test_ompl_attempts_in_children_give_the_same_paths_as_one_after_the_other() 
     assert len(together) == len(one_by_one) >= 2
     for path, points in zip(together, one_by_one, strict=True):
         np.testing.assert_array_equal(path.control_points, points)
+    # searches numbered from 1 on: the same paths as those searches among the first three
+    later = collision_free_path(
+        model, q0, qe, control_points=12, breaks=None, time_limit=20.0, attempts=2, first=1
+    )
+    assert len(later) == 2
+    for path, points in zip(later, one_by_one[-2:], strict=True):
+        np.testing.assert_array_equal(path.control_points, points)

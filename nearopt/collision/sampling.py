@@ -43,12 +43,14 @@ def collision_free_path(
     time_limit: float,
     clearance: float | None = None,
     attempts: int = 3,
+    first: int = 0,
 ) -> list[BSplinePath]:
     """Paths from θ0 to θe whose every pair keeps the margin, certified: one per OMPL search
     that succeeds (they may pass the obstacles on different sides).
 
-    The ``attempts`` searches run at the same time, each in a forked child process whose OMPL
-    generator is seeded afresh (:data:`OMPL_SEED` plus the attempt's number), so the same
+    The ``attempts`` searches (numbered ``first``, ``first`` + 1, …) run at the same time, each
+    in a forked child process whose OMPL generator is seeded afresh (:data:`OMPL_SEED` plus the
+    search's number: a search gives the same path whichever others run with it), so the same
     request gives the same paths whatever ran before in this process (OMPL seeds once per
     process) and however the children share the cores; where ``os.fork`` is missing they run
     here one after the other (reproducible for the first request). Each has the whole time
@@ -76,7 +78,8 @@ def collision_free_path(
 
     began = time.perf_counter()
     answers = in_children(
-        [lambda i=i: attempt(OMPL_SEED + i) for i in range(attempts)], "the OMPL search"
+        [lambda i=i: attempt(OMPL_SEED + i) for i in range(first, first + attempts)],
+        "the OMPL search",
     )
     found = [c for a in answers if not isinstance(a, CollisionError) for c in a]
     errors = [a for a in answers if isinstance(a, CollisionError)]
