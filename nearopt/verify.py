@@ -741,9 +741,7 @@ def _duration_check(trajectory: Motion, duration: object, at_most: bool = False)
 
 
 def _clearance_check(collisions: CollisionModel, motion: _Sampled) -> Check:
-    dist = np.array([collisions.distances(x) for x in motion.q])
-    k_t, k_p = np.unravel_index(np.argmin(dist), dist.shape)
-    closest = float(dist[k_t, k_p])
+    k_t, k_p, closest = collisions.closest_along(motion.q)
     return Check(
         "clearance (coal)",
         collisions.margin - closest,

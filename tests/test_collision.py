@@ -137,6 +137,13 @@ def test_the_broad_phase_is_exact_below_its_level_and_a_lower_bound_above(
         assert np.all((d <= exact + tol)[~asked]), name
         if level == 0.05:  # the boxes spare coal most pairs
             assert np.mean(~asked) > 0.5, (name, np.mean(~asked))
+    # the closest pair over the configurations clear of everything, as coal finds it
+    clear = np.all(exact > 0.0, axis=1)
+    assert clear.sum() >= 5, name
+    k_t, k_p, closest = cm.closest_along(qs[clear])
+    least = np.unravel_index(np.argmin(exact[clear]), exact[clear].shape)
+    assert abs(closest - exact[clear][least]) <= tol[clear][least], (name, closest)
+    assert abs(exact[clear][k_t, k_p] - closest) <= tol[clear][k_t, k_p]
     # every pair is queried again afterwards (the broad phase deactivates pairs for a query)
     apart = exact[-1] > 0.0
     np.testing.assert_allclose(cm.distances(qs[-1])[apart], exact[-1][apart], rtol=1e-5, atol=1e-6)

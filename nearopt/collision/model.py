@@ -271,6 +271,21 @@ class CollisionModel:
         values, _ = self._bounded(self._configurations(qs), below)
         return values
 
+    def closest_along(self, qs: ArrayLike) -> tuple[int, int, float]:
+        """The closest pair over the configurations ``qs`` (shape (S, n)): the configuration's
+        index, the pair's index in :attr:`pairs` and their signed distance [m] (coal's; the
+        other pairs bounded from below by their bodies' boxes first, as
+        :meth:`distances_along`). (−1, −1, inf) when nothing is checked."""
+        qs = self._configurations(qs)
+        if len(self._pairs) == 0 or len(qs) == 0:
+            return -1, -1, np.inf
+        dist, exact = self._bounded(qs, self.margin)
+        t0 = time.perf_counter()
+        self._least(qs, dist, exact)
+        self.seconds += time.perf_counter() - t0
+        k_t, k_p = np.unravel_index(int(np.argmin(dist)), dist.shape)
+        return int(k_t), int(k_p), float(dist[k_t, k_p])
+
     def closest(self, q: ArrayLike) -> Contact:
         """The closest checked pair at θ (``distance`` inf when nothing is checked)."""
         d = self.distances(q)
@@ -456,15 +471,7 @@ class CollisionModel:
             bound = slope(s[:-1], s[1:]) @ self.motion_rates.T * np.diff(s)[:, None]
         dist, exact = self._bounded(q, level)
         t0 = time.perf_counter()
-        while True:  # the smallest exactly: coal where a lower bound is below the least known
-            low = ~exact & (dist < np.min(dist, where=exact, initial=np.inf))
-            if not low.any():
-                break
-            if not exact.any():  # nothing known yet: the least bound first
-                low = np.zeros(exact.shape, dtype=bool)
-                low.flat[int(np.argmin(dist))] = True
-            self._exactly(q, low, dist)
-            exact |= low
+        self._least(q, dist, exact)
         if bound is not None and dist.min() >= level:  # (else not certified: no need)
             # the intervals the bounds alone leave open: their ends exactly
             open_ = dist[:-1] + dist[1:] - 2.0 * level < bound
@@ -550,6 +557,21 @@ class CollisionModel:
         self._exactly(qs, exact, values)
         self.seconds += time.perf_counter() - t0
         return values, exact
+
+    def _least(
+        self, qs: NDArray[np.float64], dist: NDArray[np.float64], exact: NDArray[np.bool_]
+    ) -> None:
+        """Make the least of ``dist`` (S, P) exact (in place, ``exact`` updated): coal's
+        distance wherever a lower bound lies below the least one known."""
+        while True:
+            low = ~exact & (dist < np.min(dist, where=exact, initial=np.inf))
+            if not low.any():
+                return
+            if not exact.any():  # nothing known yet: the least bound first
+                low = np.zeros(exact.shape, dtype=bool)
+                low.flat[int(np.argmin(dist))] = True
+            self._exactly(qs, low, dist)
+            exact |= low
 
     def _exactly(
         self, qs: NDArray[np.float64], where: NDArray[np.bool_], values: NDArray[np.float64]
