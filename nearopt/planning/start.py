@@ -141,8 +141,9 @@ def ompl_starts(
 ) -> list[BSplinePath]:
     """The OMPL candidates stage 2 may start from: :data:`SEARCHES` [0] searches at once, then
     :data:`SEARCHES` [1] more where they found fewer than two paths (each search seeded by its
-    number: the first ones are the same either way). Raises what
-    :func:`~nearopt.collision.collision_free_path` raises when none is found."""
+    number: the first ones are the same either way). Raises a
+    :class:`~nearopt.CollisionError` where the start or the goal collides, or where no search
+    found a path."""
     found: list[BSplinePath] = []
     first = 0
     for count in SEARCHES:
