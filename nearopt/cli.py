@@ -12,7 +12,8 @@ output place is checked before planning (:mod:`nearopt.outputs`: files are repla
 links followed, devices and FIFOs written as streams, ``-`` is the standard output). Every plan is
 verified (:func:`nearopt.verify`, at ``--rate``) before anything is written; a motion that fails
 verification ends the same way with exit code 1. Ctrl-C ends planning with the best plan so far:
-it is verified and written, and the exit code is 130; a second Ctrl-C aborts at once.
+it is verified and written, and the exit code is 130; a second Ctrl-C aborts (at once, or at the
+end of the output being made).
 """
 
 from __future__ import annotations
@@ -58,6 +59,7 @@ from .verify import VerificationError
 
 if TYPE_CHECKING:
     from collections.abc import Iterator, Sequence
+    from types import FrameType
 
 __all__ = ["main", "parse_plan", "plan_request"]
 
@@ -595,11 +597,12 @@ def _write(
     interrupt: _Interrupt,
 ) -> None:
     """Produce every output first, then write them all (a failure leaves no file behind); the
-    sampling warnings after success only. A second Ctrl-C while they are produced aborts even
-    where a library swallowed its exception (trimesh catches BaseException around its optional
-    imports, which the viewer's page makes)."""
+    sampling warnings after success only. A second Ctrl-C while they are produced aborts when
+    the step under way ends (:meth:`_Interrupt.held`), and also where a library swallowed an
+    exception (trimesh catches BaseException around its optional imports, which the viewer's
+    page makes)."""
     contents: dict[Output, str | bytes] = {}
-    with warnings.catch_warnings(record=True) as caught:
+    with warnings.catch_warnings(record=True) as caught, interrupt.held():
         warnings.simplefilter("always", SamplingWarning)
         if args.json:
             contents[outputs["--json"]] = json_text(result, args.rate)
@@ -607,13 +610,15 @@ def _write(
             contents[outputs["--csv"]] = csv_text(result, args.rate)
         bag = _ros_outputs(result, args, outputs, contents)
     if args.html:
-        from .viz.viewer import plan_html
+        with interrupt.held():
+            from .viz.viewer import plan_html
 
-        contents[outputs["--html"]] = plan_html(result)
+            contents[outputs["--html"]] = plan_html(result)
     if plots is not None:
-        from .viz.figures import render_figures
+        with interrupt.held():
+            from .viz.figures import render_figures
 
-        rendered = render_figures(result)
+            rendered = render_figures(result)
         plots.mkdir(exist_ok=True)
         contents.update(
             {
@@ -742,10 +747,26 @@ class _Interrupt:
 
     def __init__(self) -> None:
         self.count = 0
+        self.holding = False
 
-    def _handler(self, signum: int, frame: object) -> None:
+    def _handler(self, signum: int, frame: FrameType | None) -> None:
+        if _in_a_callback(frame) and hasattr(signal, "setitimer"):
+            # Python code run by C code that cannot pass an exception on (numba unpickling a
+            # constant: SystemError; a nanobind module's import: terminate): the signal again
+            # in 5 ms, where the interpreter is back in plain Python
+            previous = signal.getsignal(signal.SIGALRM)
+
+            def again(_: int, later: FrameType | None) -> None:
+                signal.signal(signal.SIGALRM, previous)
+                self._handler(signum, later)
+
+            signal.signal(signal.SIGALRM, again)
+            signal.setitimer(signal.ITIMER_REAL, 0.005)
+            return
         self.count += 1
         if self.count > 1:
+            if self.holding:  # taken where the outputs are made (see held)
+                return
             raise _Abort
         raise KeyboardInterrupt
 
@@ -753,6 +774,19 @@ class _Interrupt:
         """Raise the abort if a second SIGINT came (its exception may have been caught)."""
         if self.count > 1:
             raise _Abort
+
+    @contextlib.contextmanager
+    def held(self) -> Iterator[None]:
+        """While the outputs are made: a second SIGINT aborts when the step under way ends
+        (:meth:`abort_if_second`), never inside it. An exception raised inside an extension
+        module's import or callback (the page imports trimesh, whose import initialises a
+        nanobind module) ends the process (C++'s terminate, exit −6 instead of 130)."""
+        self.holding = True
+        try:
+            yield
+        finally:
+            self.holding = False
+        self.abort_if_second()
 
     def armed(self) -> contextlib.AbstractContextManager:
         """While planning: SIGINT raises KeyboardInterrupt once; afterwards, any SIGINT aborts."""
@@ -768,6 +802,17 @@ class _Interrupt:
 
 class _Abort(BaseException):
     """A second Ctrl-C: stop now."""
+
+
+def _in_a_callback(frame: FrameType | None) -> bool:
+    """Whether the interrupted Python code runs inside an import or numba's unpickling of a
+    constant (code that C code called, where an exception may not pass)."""
+    while frame is not None:
+        code = frame.f_code
+        if code.co_filename.startswith("<frozen importlib") or code.co_name == "_numba_unpickle":
+            return True
+        frame = frame.f_back
+    return False
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -148,3 +148,65 @@ def test_a_second_ctrl_c_swallowed_by_a_library_still_aborts(
         "nearopt: error: aborted by a second Ctrl-C; nothing written"
     )
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_second_ctrl_c_while_an_output_is_made_waits_for_that_step_then_aborts(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, capsys: pytest.CaptureFixture[str]
+) -> None:
+    """The CI failure of 2026-12-05: a second Ctrl-C while the page was made landed in trimesh's
+    import of a nanobind module, whose initialisation cannot pass a Python exception on: C++'s
+    terminate, exit −6. While an output is made the abort waits for that step to end."""
+    import nearopt.viz.viewer as viewer
+
+    finished = []
+
+    def page(result: object) -> str:
+        signal.raise_signal(signal.SIGINT)  # the second Ctrl-C (planning has ended)
+        finished.append(True)  # (an exception here would have ended an extension's import)
+        return "<html></html>"
+
+    monkeypatch.setattr(viewer, "plan_html", page)
+    before = signal.getsignal(signal.SIGINT)
+    try:
+        with pytest.raises(SystemExit) as ended:
+            cli.main(
+                ["plan", "--robot", "two_link", "--q0", "45", "-90", "--qe", "-90", "0", "--deg"]
+                + ["--stage1-only", "--html", str(tmp_path / "p.html")]
+                + ["--json", str(tmp_path / "p.json")]
+            )
+    finally:
+        signal.signal(signal.SIGINT, before)
+    assert finished == [True]
+    assert ended.value.code == 130
+    assert capsys.readouterr().err.strip() == (
+        "nearopt: error: aborted by a second Ctrl-C; nothing written"
+    )
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_ctrl_c_during_an_import_is_taken_when_it_ends(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The CLI's handler does not raise inside an import (a nanobind module's initialisation
+    cannot pass the exception on: terminate) nor inside numba's unpickling of a constant (a
+    SystemError instead of the interrupt): it takes the signal again a few ms later."""
+    (tmp_path / "nearopt_ctrl_c_probe.py").write_text(
+        "import signal\nsignal.raise_signal(signal.SIGINT)\nFINISHED = True\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    monkeypatch.delitem(sys.modules, "nearopt_ctrl_c_probe", raising=False)
+    interrupt = cli._Interrupt()
+    before = signal.getsignal(signal.SIGINT)
+    imported = False
+    start = time.perf_counter()
+    try:
+        with pytest.raises(KeyboardInterrupt), interrupt.armed():
+            import nearopt_ctrl_c_probe  # noqa: F401 - the Ctrl-C arrives inside its import
+
+            imported = nearopt_ctrl_c_probe.FINISHED
+            time.sleep(2.0)  # the interrupt is taken here
+    finally:
+        signal.signal(signal.SIGINT, before)
+        sys.modules.pop("nearopt_ctrl_c_probe", None)
+    assert imported
+    assert time.perf_counter() - start < 1.0
