@@ -134,12 +134,20 @@ def test_a_second_ctrl_c_swallowed_by_a_library_still_aborts(
         return str(np.hstack([np.zeros((3, 1)), np.zeros((4, 1))]))  # the half-made result
 
     monkeypatch.setattr(viewer, "plan_html", swallowing_page)
+    assert_aborted_while_the_page_is_made(tmp_path, capsys)
+
+
+def assert_aborted_while_the_page_is_made(
+    folder: Path, capsys: pytest.CaptureFixture[str], *more: str
+) -> None:
+    """``nearopt plan`` (two_link, stage 1, a page and ``more`` outputs in ``folder``) ends
+    with the second Ctrl-C's abort: exit code 130, its one line, nothing written."""
     before = signal.getsignal(signal.SIGINT)
     try:
         with pytest.raises(SystemExit) as ended:
             cli.main(
                 ["plan", "--robot", "two_link", "--q0", "45", "-90", "--qe", "-90", "0", "--deg"]
-                + ["--stage1-only", "--html", str(tmp_path / "p.html")]
+                + ["--stage1-only", "--html", str(folder / "p.html"), *more]
             )
     finally:
         signal.signal(signal.SIGINT, before)
@@ -147,7 +155,7 @@ def test_a_second_ctrl_c_swallowed_by_a_library_still_aborts(
     assert capsys.readouterr().err.strip() == (
         "nearopt: error: aborted by a second Ctrl-C; nothing written"
     )
-    assert list(tmp_path.iterdir()) == []
+    assert list(folder.iterdir()) == []
 
 
 def test_a_second_ctrl_c_while_an_output_is_made_waits_for_that_step_then_aborts(
@@ -166,22 +174,8 @@ def test_a_second_ctrl_c_while_an_output_is_made_waits_for_that_step_then_aborts
         return "<html></html>"
 
     monkeypatch.setattr(viewer, "plan_html", page)
-    before = signal.getsignal(signal.SIGINT)
-    try:
-        with pytest.raises(SystemExit) as ended:
-            cli.main(
-                ["plan", "--robot", "two_link", "--q0", "45", "-90", "--qe", "-90", "0", "--deg"]
-                + ["--stage1-only", "--html", str(tmp_path / "p.html")]
-                + ["--json", str(tmp_path / "p.json")]
-            )
-    finally:
-        signal.signal(signal.SIGINT, before)
+    assert_aborted_while_the_page_is_made(tmp_path, capsys, "--json", str(tmp_path / "p.json"))
     assert finished == [True]
-    assert ended.value.code == 130
-    assert capsys.readouterr().err.strip() == (
-        "nearopt: error: aborted by a second Ctrl-C; nothing written"
-    )
-    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_ctrl_c_during_an_import_is_taken_when_it_ends(
