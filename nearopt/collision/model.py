@@ -50,6 +50,8 @@ from ..validate import is_number
 from .scene import Box, Capsule, Cylinder, HalfSpace, Mesh, Scene, Sphere
 
 if TYPE_CHECKING:
+    from collections.abc import Callable
+
     from numpy.typing import ArrayLike, NDArray
 
     from ..path import Path as JointPath
@@ -387,7 +389,7 @@ class CollisionModel:
         q = path(s)
         if len(self._pairs) == 0:
             return Clearance(True, level, self.closest(q[0]), 0.0, 0)
-        dist, bound = self._first_pass(path, s, q, level)  # (S, P), (S − 1, P)
+        dist, bound, slope = self._first_pass(path, s, q, level)  # (S, P), (S − 1, P)
         k_min = np.unravel_index(int(np.argmin(dist)), dist.shape)
         checks = dist.size
 
@@ -403,7 +405,8 @@ class CollisionModel:
             return Clearance(
                 False, level, contact(worst[2], worst[0], q[k_min[0]]), worst[1], checks
             )
-        slope = _slope_bound(path)
+        if slope is None:  # a path the bound does not cover: its error
+            slope = _slope_bound(path)
         rate = self.motion_rates  # (P, n): R_j of each pair's moving bodies
         open_ = np.argwhere(dist[:-1] + dist[1:] - 2.0 * level < bound)
         # the open intervals, bisected level by level: each level's midpoints evaluated
@@ -458,15 +461,16 @@ class CollisionModel:
         s: NDArray[np.float64],
         q: NDArray[np.float64],
         level: float,
-    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None]:
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, Callable | None]:
         """:meth:`path_clearance`'s uniform samples: the distances (S, P), exact wherever the
         certificate looks at them (the smallest, and both ends of every interval it cannot
-        certify from them), lower bounds elsewhere; and the bound L (s_b − s_a) of every
-        interval and pair (S − 1, P; None for a path the bound does not cover)."""
+        certify from them), lower bounds elsewhere; the bound L (s_b − s_a) of every
+        interval and pair (S − 1, P) and the path's slope bound (:func:`_slope_bound`); both
+        None for a path the bound does not cover."""
         try:
             slope = _slope_bound(path)
         except ConfigurationError:  # raised again where the certificate needs the bound
-            bound = None
+            slope = bound = None
         else:
             bound = slope(s[:-1], s[1:]) @ self.motion_rates.T * np.diff(s)[:, None]
         dist, exact = self._bounded(q, level)
@@ -481,7 +485,7 @@ class CollisionModel:
             ends &= ~exact
             self._exactly(q, ends, dist)
         self.seconds += time.perf_counter() - t0
-        return dist, bound
+        return dist, bound, slope
 
     def __reduce__(self) -> tuple[object, ...]:
         """Pickled as its arguments (coal's shapes are not picklable): rebuilt where it is
