@@ -361,3 +361,23 @@ def test_a_killed_dask_worker_loses_nothing_and_plans_nothing_twice(
     mine = {r["id"]: (r["status"], r["J"], r["te"], r["request"]) for r in rows(out)}
     theirs = {r["id"]: (r["status"], r["J"], r["te"], r["request"]) for r in rows(local)}
     assert mine == theirs  # the same table as on the local pool
+
+
+def test_two_runs_in_one_second_name_their_chunks_apart(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """The CI failure of 2026-12-05: two sharded runs of one process within a second named
+    their chunks alike, and the second took the first's shard for its own chunk, done: the
+    failure it was to retry was never planned again. The clock stopped, the second run's chunk
+    is its own."""
+    import nearopt.batch.shards as shards
+
+    monkeypatch.setattr(shards.time, "strftime", lambda *_: "20261205T000000")
+    records = quick_motions(3)
+    tasks = write(tmp_path, records)
+    first = run_batch(tasks, tmp_path / "out", workers=1, layout="shards")
+    assert first.planned == 2 and first.failed == 1  # the motion out of range fails
+    before = set((tmp_path / "out" / "shards").glob("*.jsonl"))
+    again = run_batch(tasks, tmp_path / "out", workers=1, retry_failed=True)
+    assert again.skipped == 2 and again.failed == 1  # planned again, failed again
+    assert len(set((tmp_path / "out" / "shards").glob("*.jsonl")) - before) == 1  # its own

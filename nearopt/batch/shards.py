@@ -37,6 +37,7 @@ import csv
 import fcntl
 import hashlib
 import io
+import itertools
 import json
 import os
 import time
@@ -63,6 +64,8 @@ from .motions import (
     worker_died,
 )
 from .pools import Pool
+
+_RUNS = itertools.count(1)  # the sharded runs of this process
 
 __all__ = [
     "SHARD_FIELDS",
@@ -544,7 +547,10 @@ class _Run:
     serial: int = 0
 
     def __post_init__(self) -> None:
-        self.prefix = time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}"
+        # unique per run: two runs of one process within a second gave the same chunk names,
+        # and the second took the first's shard for its own chunk, done (a failure retried was
+        # never planned again)
+        self.prefix = time.strftime("%Y%m%dT%H%M%S") + f"-{os.getpid()}-{next(_RUNS):04d}"
         self.chunking = _Chunking(self.pool.workers)
         self.stream = iter(self.motions)
         self.left = self.motions.count  # motions not yet read from the stream
