@@ -285,6 +285,44 @@ def test_the_certificate_holds_on_dense_samples(rng: np.random.Generator) -> Non
             assert result.closest.distance < cm.margin
 
 
+@pytest.mark.parametrize("name", ["ur5", "panda", "xarm7"])
+def test_the_certificate_on_distances_computed_before_is_the_same(
+    name: str, rng: np.random.Generator
+) -> None:
+    """Stage 2 certifies a trial path on its clearance rows' distances (exact up to m⁺ +
+    ACTIVATION, box bounds beyond): the same certificate as computed afresh; the distances are
+    taken, not computed again (false ones change it); a wrong shape is refused."""
+    from nearopt.path import BSplinePath
+    from nearopt.planning.scp import CollisionSamples
+
+    robot = load(name)
+    cm = CollisionModel(robot, CELL)
+    outcomes = set()
+    for _ in range(10):
+        a = random_configuration(robot, rng)
+        b = a + 0.3 * (random_configuration(robot, rng) - a)  # short ones are often clear
+        bend = 0.2 * (random_configuration(robot, rng) - a)
+        x = np.linspace(0.0, 1.0, 12)[:, None]
+        path = BSplinePath(a + (b - a) * x + np.sin(np.pi * x) * bend)
+        fresh = cm.path_clearance(path, samples=128)
+        samples = CollisionSamples(cm, path)
+        given = cm.path_clearance(
+            path, samples=128, distances=samples.dist, exact_below=samples.below
+        )
+        assert given.certified == fresh.certified == samples.certified()
+        outcomes.add(fresh.certified)
+        if fresh.certified or fresh.closest.distance > 0.0:  # (penetrations: EPA's depth)
+            assert abs(given.closest.distance - fresh.closest.distance) <= 1e-6
+        if fresh.certified:  # false distances (every pair in contact at s = 0) are believed
+            false = samples.dist.copy()
+            false[0] = -1.0
+            lied = cm.path_clearance(path, samples=128, distances=false, exact_below=samples.below)
+            assert not lied.certified and lied.closest.distance == -1.0 and lied.s == 0.0
+    assert outcomes == {True, False}, name  # both kinds of path were checked
+    with pytest.raises(nearopt.ConfigurationError, match="shape"):
+        cm.path_clearance(path, samples=64, distances=samples.dist, exact_below=samples.below)
+
+
 # ---------------------------------------------------------------- plans in a cell
 @pytest.mark.slow
 @pytest.mark.parametrize("name", ["ur5", "panda"])

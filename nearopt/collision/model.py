@@ -368,6 +368,8 @@ class CollisionModel:
         *,
         samples: int = 64,
         max_checks: int = 2_000_000,
+        distances: NDArray[np.float64] | None = None,
+        exact_below: float = -np.inf,
     ) -> Clearance:
         """Check a whole path: is every pair at least ``level`` apart at every s?
 
@@ -382,6 +384,13 @@ class CollisionModel:
             Uniform intervals checked first; each is bisected until certified.
         max_checks
             Budget of pair distance evaluations; past it the path is not certified.
+        distances
+            The pairs' distances at the ``samples + 1`` uniform s computed before, shape
+            (samples + 1, len(pairs)) [m] (:meth:`distances_along`: exact where at most
+            ``exact_below``, lower bounds elsewhere): the first pass starts from them instead of
+            computing its own (e.g. a planner's clearance rows at the same points).
+        exact_below
+            The level up to which ``distances`` are exact [m].
         """
         level = self.margin if level is None else float(level)
         s_end = path.s_end
@@ -389,7 +398,15 @@ class CollisionModel:
         q = path(s)
         if len(self._pairs) == 0:
             return Clearance(True, level, self.closest(q[0]), 0.0, 0)
-        dist, bound, slope = self._first_pass(path, s, q, level)  # (S, P), (S − 1, P)
+        if distances is not None:
+            distances = np.asarray(distances, dtype=float)
+            if distances.shape != (samples + 1, len(self._pairs)):
+                raise ConfigurationError(
+                    f"distances must have shape ({samples + 1}, {len(self._pairs)}) (samples + 1, "
+                    f"pairs), got {distances.shape}"
+                )
+        known = None if distances is None else (distances.copy(), distances <= exact_below)
+        dist, bound, slope = self._first_pass(path, s, q, level, known)  # (S, P), (S − 1, P)
         k_min = np.unravel_index(int(np.argmin(dist)), dist.shape)
         checks = dist.size
 
@@ -461,19 +478,21 @@ class CollisionModel:
         s: NDArray[np.float64],
         q: NDArray[np.float64],
         level: float,
+        known: tuple[NDArray[np.float64], NDArray[np.bool_]] | None = None,
     ) -> tuple[NDArray[np.float64], NDArray[np.float64] | None, Callable | None]:
         """:meth:`path_clearance`'s uniform samples: the distances (S, P), exact wherever the
         certificate looks at them (the smallest, and both ends of every interval it cannot
         certify from them), lower bounds elsewhere; the bound L (s_b − s_a) of every
         interval and pair (S − 1, P) and the path's slope bound (:func:`_slope_bound`); both
-        None for a path the bound does not cover."""
+        None for a path the bound does not cover. ``known``: distances computed before and
+        where they are exact (taken, and completed where needed, instead of computed)."""
         try:
             slope = _slope_bound(path)
         except ConfigurationError:  # raised again where the certificate needs the bound
             slope = bound = None
         else:
             bound = slope(s[:-1], s[1:]) @ self.motion_rates.T * np.diff(s)[:, None]
-        dist, exact = self._bounded(q, level)
+        dist, exact = self._bounded(q, level) if known is None else known
         t0 = time.perf_counter()
         self._least(q, dist, exact)
         if bound is not None and dist.min() >= level:  # (else not certified: no need)

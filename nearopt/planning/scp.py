@@ -217,7 +217,7 @@ def sequential_convex(
             reason, message = StopReason.CONVERGED, _MODEL_GAINS_NOTHING.format(options.tolerance)
             break
         guess = disc.b(z_model)  # stage 1 of the trial starts from the model's timing
-        p_trial, trial, timed = _try_step(
+        p_trial, trial, timed, samples = _try_step(
             robot, p + dp, goal, collisions, path_of,
             lambda q, like=timing, guess=guess: time_it(q, like, guess), kept,
         )  # fmt: skip
@@ -230,6 +230,7 @@ def sequential_convex(
         radius = new_radius(radius, gain, gain / max(promised, 1e-300), reach)
         if gain > 0.0:
             p, timing, index = p_trial, trial, index + 1
+            parts = IterateParts(timing, path_of(p), samples=samples)  # the certificate's
             run.report(index, timing, float(np.max(np.abs(dp))), timing.trajectory.path)
             small = small + 1 if gain < options.tolerance * abs(j0) else 0
             if small == 3:
@@ -523,30 +524,34 @@ def _try_step(
     path_of: Callable[[NDArray[np.float64]], BSplinePath],
     time_it: Callable[[NDArray[np.float64]], TimingResult],
     ends: MovingEnds,
-) -> tuple[NDArray[np.float64] | None, TimingResult | None, int]:
+) -> tuple[NDArray[np.float64] | None, TimingResult | None, int, CollisionSamples | None]:
     """The step's iterate (θe back onto the pose, the ends' control points back onto their
-    rays), its timing if it is certified clear and stage 1 times it (None otherwise), and the
-    stage-1 solves spent (0 or 1)."""
+    rays), its timing if it is certified clear and stage 1 times it (None otherwise), the
+    stage-1 solves spent (0 or 1) and its path's clearances (:class:`CollisionSamples`, on
+    which the certificate starts; None without obstacles)."""
     n = robot.n
     if goal is not None:  # back onto the pose (to first order the step never left it)
         end = _onto(robot, goal, p_trial[-n:])
         p_trial = None if end is None else np.concatenate([p_trial[:-n], end])
     if p_trial is not None and ends.moving:  # (to first order the step kept them there)
         p_trial = ends.onto_rays(p_trial)
-    if p_trial is None or not (
-        collisions is None or collisions.path_clearance(path_of(p_trial)).certified
-    ):
-        return p_trial, None, 0
+    if p_trial is None:
+        return p_trial, None, 0, None
+    samples = None
+    if collisions is not None:
+        samples = CollisionSamples(collisions, path_of(p_trial), end=goal is not None)
+        if not samples.certified():
+            return p_trial, None, 0, samples
     try:
-        return p_trial, time_it(p_trial), 1
+        return p_trial, time_it(p_trial), 1, samples
     except (InfeasiblePathError, SolverError):
-        return p_trial, None, 0
+        return p_trial, None, 0, samples
     except ConfigurationError:
         if not ends.moving:
             raise
         # a moving end's direction lost to rounding (the end's control point within ~1e-8 of
         # θ0 or θe): a step to reject like any other
-        return p_trial, None, 0
+        return p_trial, None, 0, samples
 
 
 MODEL_TOLERANCE = 1e-7
@@ -595,8 +600,17 @@ class CollisionSamples:
         sigma = np.linspace(0.0, 1.0, checks)
         self.q = path(sigma)
         self.basis = path.basis(sigma)[:, 1 : None if end else -1]  # (S, K), or K + 1
-        self.dist = collisions.distances_along(self.q, _inner(collisions.margin) + ACTIVATION)
+        self.below = _inner(collisions.margin) + ACTIVATION  # exact up to this [m]
+        self.dist = collisions.distances_along(self.q, self.below)
         self._gradients: dict[int, tuple[NDArray[np.int64], NDArray, NDArray]] = {}
+
+    def certified(self) -> bool:
+        """Whether the path keeps the margin at every σ (the certificate of
+        :meth:`~nearopt.collision.CollisionModel.path_clearance`, its first pass on these
+        checks' distances)."""
+        return self.collisions.path_clearance(
+            self.path, samples=len(self.q) - 1, distances=self.dist, exact_below=self.below
+        ).certified
 
     def gradients(
         self, m: int, pairs: NDArray[np.int64]
