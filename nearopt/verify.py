@@ -69,10 +69,17 @@ limit)."""
 MAX_STEP = 1e-2
 """The forward simulation's longest Runge-Kutta step [s] (halved where it is not accurate)."""
 STABLE = 3.0
-"""The forward simulation's step is at most STABLE/ρ, ρ the largest rate of the joint damping:
-inside the method's interval of stability on the negative real axis (about [−3.31, 0])."""
+"""Where the joint damping's largest rate ρ exceeds STABLE/:data:`MAX_STEP`, the explicit
+method's steps would have to stay below STABLE/ρ (inside its interval of stability on the
+negative real axis, about [−3.31, 0]): the forward simulation is then implicit (Radau IIA)."""
+NEWTON = 1e-3
+"""The implicit forward simulation's Newton iterations stop where the error they leave in a
+step is estimated below NEWTON times the simulation's accuracy."""
 MAX_HALVINGS = 6
 """How often the forward simulation of a window halves its step at most."""
+MAX_NEWTON = 20
+"""Newton iterations of a step of the implicit forward simulation at most (then its lanes end
+in NaN and the check fails)."""
 LANES = 32
 """Windows the forward simulation integrates side by side at most (its memory: their torques at
 every Runge-Kutta stage)."""
@@ -957,10 +964,12 @@ def _simulate(
     """Integrate θ̈ = ABA(θ, θ̇, u(t) − Dθ̇) under the motion's torques, in restarted windows.
 
     Dormand and Prince's fifth-order Runge-Kutta method in equal steps: the torque jumps where
-    the path acceleration changes (the knots), so each window is also cut there. Each window is
-    integrated with steps no longer than :data:`MAX_STEP` (and than 3/ρ, ρ the largest rate of
-    the joint damping, |eig H⁻¹D| along the motion: the stiff damping of an arm such as xarm7
-    stays inside the method's stability region), then again with every step halved, until two
+    the path acceleration changes (the knots), so each window is also cut there. Where the joint
+    damping is stiff (ρ = |eig H⁻¹D| along the motion above :data:`STABLE` / :data:`MAX_STEP`,
+    e.g. xarm7's wrist: 1.5e4 1/s), the explicit method would need steps below 3/ρ; the
+    three-stage Radau IIA collocation method (implicit, also of order 5, :class:`_Collocation`)
+    is used instead. Each window is integrated with steps no longer than :data:`MAX_STEP`,
+    then again with every step halved, until two
     results differ by at most (2⁵ − 1) × ``accuracy`` (the finer one's error is then about
     ``accuracy``: Richardson's estimate) or :data:`MAX_HALVINGS` times. At most
     :data:`MAX_WINDOWS` windows are simulated, spread evenly over the motion with the last one
@@ -970,7 +979,7 @@ def _simulate(
     Returns the simulated end state and the largest window defect.
     """
     te, knots = trajectory.duration, trajectory.t
-    largest = min(MAX_STEP, STABLE / max(_damping_rate(robot, trajectory), 1e-300))
+    stiff = _damping_rate(robot, trajectory) * MAX_STEP > STABLE
     starts = np.arange(0.0, te, window)
     if starts.size > MAX_WINDOWS:
         starts = starts[np.unique(np.linspace(0, starts.size - 1, MAX_WINDOWS).round().astype(int))]
@@ -980,7 +989,11 @@ def _simulate(
         for w0, w1 in zip(starts, ends, strict=True)
     ]
     first = _states(trajectory, starts)
-    integrate = _Integrator(robot, trajectory, largest)
+    integrate = (
+        _Collocation(robot, trajectory, MAX_STEP, NEWTON * accuracy)
+        if stiff
+        else _Integrator(robot, trajectory, MAX_STEP)
+    )
     both = integrate([*cuts, *cuts], np.vstack([first, first]), [1] * len(cuts) + [2] * len(cuts))
     x, finer = both[: len(cuts)], both[len(cuts) :]
     open_ = np.arange(len(cuts))  # the windows whose last two results still differ
@@ -1090,6 +1103,130 @@ class _Integrator:
                 acceleration = aba(1, pool, q, v, tau).reshape(n, lanes)
             advance(state, slopes, _WEIGHTS, h, acceleration)
         return state.T
+
+
+# the three-stage Radau IIA method (order 5; Hairer and Wanner, *Solving Ordinary Differential
+# Equations II*, table IV.5.6): its nodes, behind the step's start, and coefficients
+_RADAU_NODES = np.array([0.0, (4 - np.sqrt(6)) / 10, (4 + np.sqrt(6)) / 10, 1.0])
+_RADAU = np.array(
+    [
+        [(88 - 7 * np.sqrt(6)) / 360, (296 - 169 * np.sqrt(6)) / 1800, (-2 + 3 * np.sqrt(6)) / 225],
+        [(296 + 169 * np.sqrt(6)) / 1800, (88 + 7 * np.sqrt(6)) / 360, (-2 - 3 * np.sqrt(6)) / 225],
+        [(16 - np.sqrt(6)) / 36, (16 + np.sqrt(6)) / 36, 1 / 9],
+    ]
+)
+JACOBIAN_EVERY = 4
+"""Steps of the implicit forward simulation between two evaluations of its Newton matrix's
+damping part H⁻¹D (H changes little over a few steps; Newton's convergence is measured)."""
+
+
+class _Collocation(_Integrator):
+    """The three-stage Radau IIA method (implicit, order 5, L-stable) of several windows side
+    by side, for an arm whose joint damping is stiff: a step's stage increments Z_i = x(t₀ +
+    c_i h) − x(t₀) solve Z = h (A ⊗ I) f(x₀ + Z) by simplified Newton iterations, whose matrix
+    holds the stiff part of ∂f/∂x, the damping's ∂θ̈/∂θ̇ = −H⁻¹D (evaluated every
+    :data:`JACOBIAN_EVERY` steps by ABA). The iterations start from the motion's own states at
+    the stages (where the arm should be; the fixed point they converge to does not depend on
+    it) and stop where the error they leave, estimated from their rate of contraction
+    (Hairer and Wanner's rule), is below ``tolerance`` [rad, rad/s]; a lane that does not
+    contract ends in NaN (its check fails)."""
+
+    def __init__(self, robot: Robot, trajectory: Motion, step: float, tolerance: float) -> None:
+        super().__init__(robot, trajectory, step)
+        self.tolerance = tolerance
+
+    def __call__(
+        self, cuts: list[NDArray[np.float64]], x: NDArray[np.float64], splits: list[int]
+    ) -> NDArray[np.float64]:
+        """As :meth:`_Integrator.__call__`, by Radau IIA."""
+        if len(cuts) > LANES:
+            return np.vstack(
+                [
+                    self(cuts[i : i + LANES], x[i : i + LANES], splits[i : i + LANES])
+                    for i in range(0, len(cuts), LANES)
+                ]
+            )
+        n = x.shape[1] // 2
+        h_all, times = self._steps(cuts, splits)
+        times = times[..., :1] + h_all[..., None] * _RADAU_NODES  # (steps, lanes, 4)
+        live = h_all > 0.0
+        planned = np.zeros((*times.shape, 2 * n))  # the motion's states: the iterations' start
+        planned[live] = np.hstack(self.trajectory.states(times[live].ravel())[:2]).reshape(
+            -1, 4, 2 * n
+        )
+        u = np.zeros((*times.shape[:2], 3, n))
+        u[live] = self.trajectory.torque(times[live][:, 1:].ravel()).reshape(-1, 3, n)
+        state, rate = x.copy(), np.zeros((x.shape[0], n, n))
+        contraction = 1.0  # the last step's η = θ/(1 − θ) (Hairer and Wanner, IV.8)
+        for k in range(h_all.shape[0]):
+            lanes = np.flatnonzero(live[k])
+            if k % JACOBIAN_EVERY == 0:
+                rate[lanes] = self._damping_rates(state[lanes, :n])
+            z = planned[k, lanes, 1:] - planned[k, lanes, :1]
+            z, contraction = self._newton(
+                state[lanes], z, h_all[k, lanes], u[k, lanes], rate[lanes], contraction
+            )
+            state[lanes] += z[:, 2]
+        return state
+
+    def _damping_rates(self, q: NDArray[np.float64]) -> NDArray[np.float64]:
+        """H(θ)⁻¹D at each θ of ``q`` (lanes, n): ∂θ̈/∂θ̇'s damping part is its negative; from
+        one batched ABA, H⁻¹ (D e_j − g) − H⁻¹(−g) at θ̇ = 0 [1/s], shape (lanes, n, n)."""
+        lanes, n = q.shape
+        torques = np.zeros((lanes, n + 1, n))
+        torques[:, 1:] = np.diag(self.damping)
+        at = np.ascontiguousarray(np.repeat(q, n + 1, axis=0).T)
+        a = pin.abaInParallel(
+            1, self.pool, at, np.zeros_like(at), np.ascontiguousarray(torques.reshape(-1, n).T)
+        )
+        a = a.T.reshape(lanes, n + 1, n)
+        return (a[:, 1:] - a[:, :1]).transpose(0, 2, 1)
+
+    def _newton(
+        self,
+        x0: NDArray[np.float64],
+        z: NDArray[np.float64],
+        h: NDArray[np.float64],
+        u: NDArray[np.float64],
+        rate: NDArray[np.float64],
+        contraction: float,
+    ) -> tuple[NDArray[np.float64], float]:
+        """The stage increments Z (lanes, 3, 2n) of one step from x0 (lanes, 2n), Z's start
+        ``z``, the steps h, the stages' torques u (lanes, 3, n) and the damping's H⁻¹D; and the
+        estimated contraction for the next step. The Newton matrix I − h A ⊗ ∂f/∂x, with
+        ∂f/∂x = [[0, I], [0, −H⁻¹D]], is solved for the θ̇ parts (I + h A ⊗ H⁻¹D, 3n × 3n)
+        and the θ parts follow: Δθ = −r_θ + h (A ⊗ I) Δθ̇."""
+        lanes, n = u.shape[0], u.shape[2]
+        ha = h[:, None, None] * _RADAU  # (lanes, 3, 3)
+        matrix = np.eye(3 * n) + (ha[:, :, None, :, None] * rate[:, None, :, None, :]).reshape(
+            lanes, 3 * n, 3 * n
+        )
+        inverse = np.linalg.inv(matrix)
+        last, contraction = np.inf, contraction**0.8  # (the last step's, a little more cautious)
+        for _ in range(MAX_NEWTON):
+            at = x0[:, None, :] + z  # (lanes, 3, 2n)
+            q, v = at[..., :n].reshape(-1, n), at[..., n:].reshape(-1, n)
+            tau = u.reshape(-1, n) - self.damping * v
+            a = pin.abaInParallel(
+                1, self.pool, np.ascontiguousarray(q.T), np.ascontiguousarray(v.T),
+                np.ascontiguousarray(tau.T),
+            ).T.reshape(lanes, 3, n)  # fmt: skip
+            r_q = z[..., :n] - np.einsum("lij,ljb->lib", ha, at[..., n:])
+            r_v = z[..., n:] - np.einsum("lij,ljb->lib", ha, a)
+            dv = -np.einsum("lab,lb->la", inverse, r_v.reshape(lanes, -1)).reshape(lanes, 3, n)
+            dq = -r_q + np.einsum("lij,ljb->lib", ha, dv)
+            z[..., :n] += dq
+            z[..., n:] += dv
+            size = max(float(np.max(np.abs(dq))), float(np.max(np.abs(dv))))
+            if np.isfinite(last):
+                theta = size / last
+                if not theta < 1.0:  # no contraction (or NaN): this step's result is NaN
+                    return np.full_like(z, np.nan), 1.0
+                contraction = theta / (1.0 - theta)
+            if contraction * size <= self.tolerance or size == 0.0:
+                return z, contraction
+            last = size
+        return np.full_like(z, np.nan), 1.0
 
 
 def _damping_rate(robot: Robot, trajectory: Motion) -> float:

@@ -138,7 +138,8 @@ def test_the_simulated_end_state_agrees_with_scipys_dop853(name: str) -> None:
     DOP853 at rtol 1e-12 over the same last window, piece by piece between the knots where the
     torque jumps, on an arm with more damping than the motion was planned for (so that u(t)
     takes it far from θe): the end states within the accuracy verify asks of itself (1 % of its
-    tolerance, 1e-7). xarm7's strong joint damping is stiff."""
+    tolerance, 1e-7). xarm7's strong joint damping is stiff: its simulation is implicit (Radau
+    IIA), its Newton iterations started from the motion's states, which u(t) here leaves."""
     from scipy.integrate import solve_ivp
 
     robot = load(name)
