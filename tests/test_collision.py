@@ -290,8 +290,9 @@ def test_the_certificate_on_distances_computed_before_is_the_same(
     name: str, rng: np.random.Generator
 ) -> None:
     """Stage 2 certifies a trial path on its clearance rows' distances (exact up to m⁺ +
-    ACTIVATION, box bounds beyond): the same certificate as computed afresh; the distances are
-    taken, not computed again (false ones change it); a wrong shape is refused."""
+    ACTIVATION, box bounds beyond): the same certificate as computed afresh (and as
+    ``path_is_clear``, without the nearest points); the distances are taken, not computed again
+    (false ones change it); a wrong shape is refused."""
     from nearopt.path import BSplinePath
     from nearopt.planning.scp import CollisionSamples
 
@@ -310,6 +311,9 @@ def test_the_certificate_on_distances_computed_before_is_the_same(
             path, samples=128, distances=samples.dist, exact_below=samples.below
         )
         assert given.certified == fresh.certified == samples.certified()
+        # the certificate alone (no nearest points): the same answer
+        assert cm.path_is_clear(path, samples=128) == fresh.certified
+        assert cm.path_is_clear(path) == cm.path_clearance(path).certified
         outcomes.add(fresh.certified)
         if fresh.certified or fresh.closest.distance > 0.0:  # (penetrations: EPA's depth)
             assert abs(given.closest.distance - fresh.closest.distance) <= 1e-6

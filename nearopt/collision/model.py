@@ -36,7 +36,7 @@ import time
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, NamedTuple
 
 import coal
 import numpy as np
@@ -117,6 +117,18 @@ class Clearance:
     level: float
     closest: Contact
     s: float
+    checks: int
+
+
+class _Verdict(NamedTuple):
+    """A path's certificate (:meth:`CollisionModel.path_clearance`): whether it holds, the
+    least distance found [m], its s, its pair's index and configuration (None: θ(s))."""
+
+    certified: bool
+    distance: float
+    s: float
+    pair: int
+    at: NDArray[np.float64] | None
     checks: int
 
 
@@ -393,11 +405,50 @@ class CollisionModel:
             The level up to which ``distances`` are exact [m].
         """
         level = self.margin if level is None else float(level)
+        if len(self._pairs) == 0:
+            return Clearance(True, level, self.closest(path(np.zeros(1))[0]), 0.0, 0)
+        v = self._certify(path, level, samples, max_checks, distances, exact_below)
+        self._all(path([v.s])[0] if v.at is None else v.at)
+        r = self._results[v.pair]
+        closest = Contact(
+            self.pairs[v.pair],
+            v.distance,
+            np.array([r.getNearestPoint1(), r.getNearestPoint2()]),
+            v.pair,
+        )
+        return Clearance(v.certified, level, closest, v.s, v.checks)
+
+    def path_is_clear(
+        self,
+        path: JointPath,
+        level: float | None = None,
+        *,
+        samples: int = 64,
+        max_checks: int = 2_000_000,
+        distances: NDArray[np.float64] | None = None,
+        exact_below: float = -np.inf,
+    ) -> bool:
+        """:meth:`path_clearance`'s certificate alone (the same arguments and answer, without
+        the closest pair's nearest points, which cost one more query): e.g. OMPL's motion
+        checks."""
+        level = self.margin if level is None else float(level)
+        if len(self._pairs) == 0:
+            return True
+        return self._certify(path, level, samples, max_checks, distances, exact_below).certified
+
+    def _certify(
+        self,
+        path: JointPath,
+        level: float,
+        samples: int,
+        max_checks: int,
+        distances: NDArray[np.float64] | None,
+        exact_below: float,
+    ) -> _Verdict:
+        """:meth:`path_clearance`'s certificate (some pairs checked)."""
         s_end = path.s_end
         s = np.linspace(0.0, s_end, samples + 1)
         q = path(s)
-        if len(self._pairs) == 0:
-            return Clearance(True, level, self.closest(q[0]), 0.0, 0)
         if distances is not None:
             distances = np.asarray(distances, dtype=float)
             if distances.shape != (samples + 1, len(self._pairs)):
@@ -409,19 +460,9 @@ class CollisionModel:
         dist, bound, slope = self._first_pass(path, s, q, level, known)  # (S, P), (S − 1, P)
         k_min = np.unravel_index(int(np.argmin(dist)), dist.shape)
         checks = dist.size
-
-        def contact(k: int, d: float, at: NDArray[np.float64]) -> Contact:
-            self._all(at)
-            r = self._results[int(k)]
-            return Contact(
-                self.pairs[k], d, np.array([r.getNearestPoint1(), r.getNearestPoint2()]), int(k)
-            )
-
         worst = (float(dist[k_min]), float(s[k_min[0]]), int(k_min[1]))
         if worst[0] < level:
-            return Clearance(
-                False, level, contact(worst[2], worst[0], q[k_min[0]]), worst[1], checks
-            )
+            return _Verdict(False, worst[0], worst[1], worst[2], q[k_min[0]], checks)
         if slope is None:  # a path the bound does not cover: its error
             slope = _slope_bound(path)
         rate = self.motion_rates  # (P, n): R_j of each pair's moving bodies
@@ -437,9 +478,7 @@ class CollisionModel:
             if checks > max_checks or short.size:
                 j = int(short[0]) if short.size else 0
                 at = float(a[j])
-                return Clearance(
-                    False, level, contact(k[j], min(da[j], db[j]), path([at])[0]), at, checks
-                )
+                return _Verdict(False, min(da[j], db[j]), at, int(k[j]), None, checks)
             m = 0.5 * (a + b)
             points, where = np.unique(m, return_inverse=True)
             qm = path(points)
@@ -458,18 +497,14 @@ class CollisionModel:
             close = np.flatnonzero(dm < level)
             if close.size:
                 j = int(close[0])
-                return Clearance(
-                    False, level, contact(k[j], dm[j], qm[where[j]]), float(m[j]), checks
-                )
+                return _Verdict(False, dm[j], float(m[j]), int(k[j]), qm[where[j]], checks)
             halves = (a, m, da, dm), (m, b, dm, db)
             lo, hi, dl, dh = (np.concatenate(pair) for pair in zip(*halves, strict=True))
             kk = np.concatenate([k, k])
             v = np.einsum("ij,ij->i", slope(lo, hi), rate[kk]) * (hi - lo)
             keep = dl + dh - 2.0 * level < v
             a, b, da, db, k = lo[keep], hi[keep], dl[keep], dh[keep], kk[keep]
-        return Clearance(
-            True, level, contact(worst[2], worst[0], path([worst[1]])[0]), worst[1], checks
-        )
+        return _Verdict(True, worst[0], worst[1], worst[2], None, checks)
 
     # ------------------------------------------------------------------ internals
     def _first_pass(

@@ -96,6 +96,11 @@ def collision_free_path(
 
 
 SEARCH_CHECKS = 20_000  # validity and motion checks one OMPL search may take (about 1-2 s)
+MOTION_SAMPLES = 4
+"""Intervals of an OMPL motion's first pass (its certificate bisects where they do not
+suffice)."""
+KNOWN_STATES = 4096
+"""States whose distances a search keeps for the motions that end there (then forgotten)."""
 
 
 def search_paths(
@@ -215,11 +220,22 @@ def _ompl_setup(
         return margin if near else clearance
 
     checks = [0]  # validity and motion checks so far: the searches' deterministic clock
+    # the distances of the states checked last: RRT-Connect checks a motion right after its
+    # new end (and, long before, its tree end), so the motion's ends need not be computed again
+    known: dict[bytes, NDArray[np.float64]] = {}
+
+    def distances(q: NDArray[np.float64]) -> NDArray[np.float64]:
+        d = known.get(q.tobytes())
+        if d is None:
+            if len(known) >= KNOWN_STATES:
+                known.clear()
+            d = known[q.tobytes()] = collisions.distances(q)
+        return d
 
     def valid(state: object) -> bool:
         checks[0] += 1
         q = np.array(state[0:n])  # type: ignore[index]
-        d = collisions.distances(q)
+        d = distances(q)
         return bool(d.size == 0 or d.min() >= level(q))
 
     class Motion(ob.MotionValidator):  # type: ignore[misc, name-defined]
@@ -229,7 +245,13 @@ def _ompl_setup(
             if np.array_equal(a, b):
                 return valid(s1)
             lv = min(level(a), level(b))
-            return collisions.path_clearance(StraightPath(a, b), lv, samples=4).certified
+            path = StraightPath(a, b)
+            s = np.linspace(0.0, 1.0, MOTION_SAMPLES + 1)
+            inner = collisions.distances_along(path(s[1:-1]))
+            d = np.vstack([distances(a), inner, distances(b)])
+            return collisions.path_is_clear(
+                path, lv, samples=MOTION_SAMPLES, distances=d, exact_below=np.inf
+            )
 
     setup.setStateValidityChecker(valid)
     motion = Motion(info)
