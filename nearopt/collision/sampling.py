@@ -304,7 +304,7 @@ def _search(
         points[0], points[-1] = q0, qe
         for k in (control_points, 2 * control_points, 4 * control_points, 8 * control_points):
             spline = fit_polyline(points, k, breaks if k == control_points else None)
-            if collisions.path_clearance(spline).certified:
+            if collisions.path_is_clear(spline):
                 found.append(spline)
                 break
     return found

@@ -608,9 +608,9 @@ class CollisionSamples:
         """Whether the path keeps the margin at every σ (the certificate of
         :meth:`~nearopt.collision.CollisionModel.path_clearance`, its first pass on these
         checks' distances)."""
-        return self.collisions.path_clearance(
+        return self.collisions.path_is_clear(
             self.path, samples=len(self.q) - 1, distances=self.dist, exact_below=self.below
-        ).certified
+        )
 
     def gradients(
         self, m: int, pairs: NDArray[np.int64]

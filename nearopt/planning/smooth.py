@@ -302,7 +302,7 @@ def _trial(
     """The trial iterate where it is certified clear, timed under the limits and of J below
     ``against[0]`` (only then its stage-1 timing too); None otherwise."""
     j0, collisions = against
-    if collisions is not None and not collisions.path_clearance(path_of(p)).certified:
+    if collisions is not None and not collisions.path_is_clear(path_of(p)):
         return None
     try:
         limited = timed(p)

@@ -78,7 +78,7 @@ def first_path(setup: Segment) -> tuple[Path, Path | None, tuple[float, ...]]:
         check_inside(robot, start, bounds)
         line, via_s = start, tuple(float(x) for x in sigma)
     if collisions is not None:
-        if vias and not collisions.path_clearance(line).certified:
+        if vias and not collisions.path_is_clear(line):
             start, sigma = around_obstacles(
                 collisions,
                 points,
@@ -87,7 +87,7 @@ def first_path(setup: Segment) -> tuple[Path, Path | None, tuple[float, ...]]:
                 min(max(0.25 * (deadline - time.perf_counter()), 1e-3), 5.0),
             )
             line, via_s = start, tuple(float(x) for x in sigma)
-        if not vias and not collisions.path_clearance(line).certified:
+        if not vias and not collisions.path_is_clear(line):
             k = options.control_points
             breaks = knot_breaks(options, k)
             # a few OMPL paths (around the obstacles on different sides), the cheapest first
@@ -229,7 +229,7 @@ def around_obstacles(
     legs = len(points) - 1
     polyline, exact = [points[:1]], []
     for a, b in zip(points[:-1], points[1:], strict=True):
-        if collisions.path_clearance(StraightPath(a, b)).certified:
+        if collisions.path_is_clear(StraightPath(a, b)):
             piece = b[None, :]
         else:
             found = collision_free_path(
@@ -252,7 +252,7 @@ def around_obstacles(
         path, sigma = path_through(
             dense, k, knot_breaks(options, k) if k == k0 else None, exact[:-1], *bounds
         )
-        if collisions.path_clearance(path).certified:
+        if collisions.path_is_clear(path):
             check_inside(collisions.robot, path, bounds)
             return path, sigma
     raise CollisionError(
