@@ -351,6 +351,40 @@ def test_plans_in_a_cell_keep_the_margin_and_the_limits(name: str) -> None:
 
 
 @pytest.mark.slow
+def test_via_points_taken_from_a_cell_plans_path_cost_what_that_plan_costs() -> None:
+    """Three via-points on a cell plan's own path (panda, the work cell of bench_cell.py, its
+    pair 4 of seed 11): planning through them finds that plan's J again (a path through them,
+    the plan's own, costs it). Two of the straight legs between them collide; a single OMPL
+    search per leg went the long way round and the first path needed 128 control points: J
+    4.73 against 2.53 before each leg became the shortest of three searches."""
+    cell = Scene(
+        (
+            Obstacle("table", Box((1.6, 1.6, 0.04)), (0.0, 0.0, -0.03)),
+            Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5)),
+            Obstacle("box", Box((0.25, 0.25, 0.25)), (0.3, -0.45, 0.125)),
+        ),
+        margin=0.01,
+    )
+    robot = load("panda")
+    q0 = np.array([2.1677, 0.2651, 0.8038, -1.8751, -1.4689, 1.0357, 1.0229])
+    qe = np.array([-0.8113, 0.5404, 0.01, -1.6933, 2.1678, 0.7182, -0.0595])
+    cost = TorqueCost(0.001)
+    first = plan(robot, q0, qe, cost, scene=cell, time_limit=60.0)
+    vias = first.trajectory.states(np.array([0.25, 0.5, 0.75]) * first.duration)[0]
+    cm = CollisionModel(robot, cell)
+    legs = np.vstack([q0, vias, qe])
+    colliding = [not cm.path_is_clear(StraightPath(legs[i], legs[i + 1])) for i in range(4)]
+    assert sum(colliding) >= 2
+    through = plan(robot, q0, qe, cost, scene=cell, via=list(vias), time_limit=60.0)
+    assert through.J <= first.J * (1 + 2e-3), (through.J, first.J)
+    assert through.clearance is not None and through.clearance.certified
+    np.testing.assert_allclose(
+        through.trajectory.states(np.array(through.via_times))[0], vias, atol=1e-9
+    )
+    assert_independent_checks(robot, through.trajectory, through.cost, through.J, q0, qe)
+
+
+@pytest.mark.slow
 def test_self_collision_is_avoided_where_the_free_optimum_collides() -> None:
     robot = load("ur5")
     lo, hi = robot.limits.position_lower, robot.limits.position_upper
