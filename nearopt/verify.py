@@ -967,11 +967,11 @@ def _simulate(
     the path acceleration changes (the knots), so each window is also cut there. Where the joint
     damping is stiff (ρ = |eig H⁻¹D| along the motion above :data:`STABLE` / :data:`MAX_STEP`,
     e.g. xarm7's wrist: 1.5e4 1/s), the explicit method would need steps below 3/ρ; the
-    three-stage Radau IIA collocation method (implicit, also of order 5, :class:`_Collocation`)
-    is used instead. Each window is integrated with steps no longer than :data:`MAX_STEP`,
-    then again with every step halved, until two
-    results differ by at most (2⁵ − 1) × ``accuracy`` (the finer one's error is then about
-    ``accuracy``: Richardson's estimate) or :data:`MAX_HALVINGS` times. At most
+    three-stage Radau IIA collocation method (implicit, of order 5, 3 on stiff problems,
+    :class:`_Collocation`) is used instead. Each window is integrated with steps no longer than
+    :data:`MAX_STEP`, then again with every step halved, until two results differ by at most
+    (2ᵖ − 1) × ``accuracy``, p = 5 (3 where stiff: the finer one's error is then about
+    ``accuracy``, by Richardson's estimate) or :data:`MAX_HALVINGS` times. At most
     :data:`MAX_WINDOWS` windows are simulated, spread evenly over the motion with the last one
     always among them (a bounded cost however long the motion). The windows (and the first two
     step sizes of each) are integrated side by side, one batched ABA per Runge-Kutta stage
@@ -980,6 +980,7 @@ def _simulate(
     """
     te, knots = trajectory.duration, trajectory.t
     stiff = _damping_rate(robot, trajectory) * MAX_STEP > STABLE
+    order = STIFF_ORDER if stiff else ORDER  # (Richardson's estimate)
     starts = np.arange(0.0, te, window)
     if starts.size > MAX_WINDOWS:
         starts = starts[np.unique(np.linspace(0, starts.size - 1, MAX_WINDOWS).round().astype(int))]
@@ -998,7 +999,7 @@ def _simulate(
     x, finer = both[: len(cuts)], both[len(cuts) :]
     open_ = np.arange(len(cuts))  # the windows whose last two results still differ
     for halving in range(1, MAX_HALVINGS + 1):
-        close = np.max(np.abs(finer - x[open_]), axis=1) <= (2**ORDER - 1) * accuracy
+        close = np.max(np.abs(finer - x[open_]), axis=1) <= (2**order - 1) * accuracy
         x[open_] = finer
         open_ = open_[~close]
         if not open_.size or halving == MAX_HALVINGS:
@@ -1034,6 +1035,10 @@ _COEFFICIENTS = np.array(
 _WEIGHTS = np.array([35 / 384, 0.0, 500 / 1113, 125 / 192, -2187 / 6784, 11 / 84])
 ORDER = 5
 """The order of the forward simulation's Runge-Kutta method."""
+STIFF_ORDER = 3
+"""The order Richardson's estimate assumes of Radau IIA where the damping is stiff: its stage
+order (its classical order 5 drops towards it on stiff problems; measured ~3.3 on xarm7 with
+stronger damping)."""
 
 
 class _Integrator:
@@ -1157,14 +1162,16 @@ class _Collocation(_Integrator):
         u = np.zeros((*times.shape[:2], 3, n))
         u[live] = self.trajectory.torque(times[live][:, 1:].ravel()).reshape(-1, 3, n)
         state, rate = x.copy(), np.zeros((x.shape[0], n, n))
-        contraction = 1.0  # the last step's η = θ/(1 − θ) (Hairer and Wanner, IV.8)
+        contraction = np.ones(x.shape[0])  # each lane's last η = θ/(1 − θ) (Hairer, Wanner)
         for k in range(h_all.shape[0]):
-            lanes = np.flatnonzero(live[k])
+            lanes = np.flatnonzero(live[k] & np.isfinite(contraction))  # (NaN: failed)
+            if not lanes.size:
+                continue
             if k % JACOBIAN_EVERY == 0:
                 rate[lanes] = self._damping_rates(state[lanes, :n])
             z = planned[k, lanes, 1:] - planned[k, lanes, :1]
-            z, contraction = self._newton(
-                state[lanes], z, h_all[k, lanes], u[k, lanes], rate[lanes], contraction
+            z, contraction[lanes] = self._newton(
+                state[lanes], z, h_all[k, lanes], u[k, lanes], rate[lanes], contraction[lanes]
             )
             state[lanes] += z[:, 2]
         return state
@@ -1189,44 +1196,55 @@ class _Collocation(_Integrator):
         h: NDArray[np.float64],
         u: NDArray[np.float64],
         rate: NDArray[np.float64],
-        contraction: float,
-    ) -> tuple[NDArray[np.float64], float]:
+        contraction: NDArray[np.float64],
+    ) -> tuple[NDArray[np.float64], NDArray[np.float64]]:
         """The stage increments Z (lanes, 3, 2n) of one step from x0 (lanes, 2n), Z's start
-        ``z``, the steps h, the stages' torques u (lanes, 3, n) and the damping's H⁻¹D; and the
-        estimated contraction for the next step. The Newton matrix I − h A ⊗ ∂f/∂x, with
-        ∂f/∂x = [[0, I], [0, −H⁻¹D]], is solved for the θ̇ parts (I + h A ⊗ H⁻¹D, 3n × 3n)
-        and the θ parts follow: Δθ = −r_θ + h (A ⊗ I) Δθ̇."""
+        ``z``, the steps h, the stages' torques u (lanes, 3, n) and the damping's H⁻¹D; and
+        each lane's estimated contraction for its next step (from its last one's, ``contraction``;
+        NaN for a lane that did not contract). The Newton matrix I − h A ⊗ ∂f/∂x, with ∂f/∂x =
+        [[0, I], [0, −H⁻¹D]], is solved for the θ̇ parts (I + h A ⊗ H⁻¹D, 3n × 3n) and the θ
+        parts follow: Δθ = −r_θ + h (A ⊗ I) Δθ̇. Each lane stops on its own."""
         lanes, n = u.shape[0], u.shape[2]
         ha = h[:, None, None] * _RADAU  # (lanes, 3, 3)
         matrix = np.eye(3 * n) + (ha[:, :, None, :, None] * rate[:, None, :, None, :]).reshape(
             lanes, 3 * n, 3 * n
         )
         inverse = np.linalg.inv(matrix)
-        last, contraction = np.inf, contraction**0.8  # (the last step's, a little more cautious)
+        # the last step's η, a little more cautious (Hairer and Wanner: max(η, uround)^0.8)
+        eta = np.maximum(contraction, np.finfo(float).eps) ** 0.8
+        last = np.full(lanes, np.inf)
+        going = np.arange(lanes)  # the lanes still iterating
         for _ in range(MAX_NEWTON):
-            at = x0[:, None, :] + z  # (lanes, 3, 2n)
+            g = going
+            at = x0[g, None, :] + z[g]  # (lanes, 3, 2n)
             q, v = at[..., :n].reshape(-1, n), at[..., n:].reshape(-1, n)
-            tau = u.reshape(-1, n) - self.damping * v
+            tau = u[g].reshape(-1, n) - self.damping * v
             a = pin.abaInParallel(
                 1, self.pool, np.ascontiguousarray(q.T), np.ascontiguousarray(v.T),
                 np.ascontiguousarray(tau.T),
-            ).T.reshape(lanes, 3, n)  # fmt: skip
-            r_q = z[..., :n] - np.einsum("lij,ljb->lib", ha, at[..., n:])
-            r_v = z[..., n:] - np.einsum("lij,ljb->lib", ha, a)
-            dv = -np.einsum("lab,lb->la", inverse, r_v.reshape(lanes, -1)).reshape(lanes, 3, n)
-            dq = -r_q + np.einsum("lij,ljb->lib", ha, dv)
-            z[..., :n] += dq
-            z[..., n:] += dv
-            size = max(float(np.max(np.abs(dq))), float(np.max(np.abs(dv))))
-            if np.isfinite(last):
-                theta = size / last
-                if not theta < 1.0:  # no contraction (or NaN): this step's result is NaN
-                    return np.full_like(z, np.nan), 1.0
-                contraction = theta / (1.0 - theta)
-            if contraction * size <= self.tolerance or size == 0.0:
-                return z, contraction
-            last = size
-        return np.full_like(z, np.nan), 1.0
+            ).T.reshape(g.size, 3, n)  # fmt: skip
+            r_q = z[g, :, :n] - np.einsum("lij,ljb->lib", ha[g], at[..., n:])
+            r_v = z[g, :, n:] - np.einsum("lij,ljb->lib", ha[g], a)
+            dv = -np.einsum("lab,lb->la", inverse[g], r_v.reshape(g.size, -1))
+            dv = dv.reshape(g.size, 3, n)
+            dq = -r_q + np.einsum("lij,ljb->lib", ha[g], dv)
+            z[g, :, :n] += dq
+            z[g, :, n:] += dv
+            size = np.maximum(np.abs(dq).max(axis=(1, 2)), np.abs(dv).max(axis=(1, 2)))
+            theta = size / last[g]  # (inf before the second iteration: 0)
+            failed = ~np.isfinite(size) | ~(theta < 1.0)  # no contraction, or NaN
+            measured = np.isfinite(last[g]) & ~failed
+            eta[g[measured]] = theta[measured] / (1.0 - theta[measured])
+            done = ~failed & ((eta[g] * size <= self.tolerance) | (size == 0.0))
+            z[g[failed]] = np.nan
+            eta[g[failed]] = np.nan
+            last[g] = size
+            going = g[~failed & ~done]
+            if not going.size:
+                return z, eta
+        z[going] = np.nan
+        eta[going] = np.nan
+        return z, eta
 
 
 def _damping_rate(robot: Robot, trajectory: Motion) -> float:

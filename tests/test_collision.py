@@ -317,6 +317,12 @@ def test_the_certificate_on_distances_computed_before_is_the_same(
         outcomes.add(fresh.certified)
         if fresh.certified or fresh.closest.distance > 0.0:  # (penetrations: EPA's depth)
             assert abs(given.closest.distance - fresh.closest.distance) <= 1e-6
+        unknown = samples.dist.copy()  # NaN: not known, computed (not taken as clear)
+        unknown[::7] = np.nan
+        assert (
+            cm.path_is_clear(path, samples=128, distances=unknown, exact_below=samples.below)
+            == fresh.certified
+        )
         if fresh.certified:  # false distances (every pair in contact at s = 0) are believed
             false = samples.dist.copy()
             false[0] = -1.0

@@ -169,3 +169,30 @@ def test_the_simulated_end_state_agrees_with_scipys_dop853(name: str) -> None:
         inside = 1e-12 * max(1.0, b)
         x = solve_ivp(rate, (a + inside, b - inside), x, "DOP853", rtol=1e-12, atol=1e-13).y[:, -1]
     assert simulated.worst == pytest.approx(np.max(np.abs(x[:n] - qe)), abs=1e-7)
+
+
+def test_an_implicit_simulation_lane_that_fails_leaves_the_others_alone() -> None:
+    """Windows are simulated side by side (lanes); where Radau IIA's Newton iterations fail in
+    one (here its state is NaN), that lane ends in NaN (its check fails) and the others are
+    integrated as they would be alone (the convergence test was one for all lanes: all NaN)."""
+    import importlib
+
+    checks = importlib.import_module("nearopt.verify")
+    robot = load("xarm7")
+    lo, hi = robot.limits.position_lower, robot.limits.position_upper
+    q0, qe = 0.6 * lo + 0.4 * hi, 0.4 * lo + 0.6 * hi
+    motion = nearopt.plan(robot, q0, qe, nearopt.TorqueCost(0.01), max_iterations=0).trajectory
+    starts = np.array([0.0, 0.25 * motion.duration])
+    cuts = [
+        np.concatenate([[a], motion.t[(motion.t > a) & (motion.t < a + 0.1)], [a + 0.1]])
+        for a in starts
+    ]
+    x = np.hstack(motion.states(starts)[:2])
+    simulate = checks._Collocation(robot, motion, checks.MAX_STEP, 1e-10)
+    alone = simulate(cuts[1:], x[1:], [1])
+    x[0, 0] = np.nan
+    both = simulate(cuts, x, [1, 1])
+    assert np.all(np.isnan(both[0]))
+    np.testing.assert_allclose(both[1], alone[0], rtol=0, atol=1e-12)
+    end = np.hstack(motion.states(starts[1:] + 0.1)[:2])[0]
+    assert np.max(np.abs(both[1] - end)) < 1e-7  # and it is where the motion is

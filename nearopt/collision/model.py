@@ -400,7 +400,8 @@ class CollisionModel:
             The pairs' distances at the ``samples + 1`` uniform s computed before, shape
             (samples + 1, len(pairs)) [m] (:meth:`distances_along`: exact where at most
             ``exact_below``, lower bounds elsewhere): the first pass starts from them instead of
-            computing its own (e.g. a planner's clearance rows at the same points).
+            computing its own (e.g. a planner's clearance rows at the same points); NaN where
+            one is not known.
         exact_below
             The level up to which ``distances`` are exact [m].
         """
@@ -456,7 +457,10 @@ class CollisionModel:
                     f"distances must have shape ({samples + 1}, {len(self._pairs)}) (samples + 1, "
                     f"pairs), got {distances.shape}"
                 )
-        known = None if distances is None else (distances.copy(), distances <= exact_below)
+        known = None
+        if distances is not None:  # NaN: not known (computed, as a bound below every value)
+            unknown = np.isnan(distances)
+            known = (np.where(unknown, -np.inf, distances), ~unknown & (distances <= exact_below))
         dist, bound, slope = self._first_pass(path, s, q, level, known)  # (S, P), (S − 1, P)
         k_min = np.unravel_index(int(np.argmin(dist)), dist.shape)
         checks = dist.size

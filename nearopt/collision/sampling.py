@@ -3,7 +3,8 @@ simplifier in joint space, fitted to stage 2's B-spline.
 
 OMPL plans with a clearance larger than the margin (``clearance``) so that the B-spline, which
 cuts the corners of OMPL's polyline, keeps the margin; every straight piece OMPL accepts is
-certified collision-free by :meth:`CollisionModel.path_clearance` (not sampled at a resolution).
+certified collision-free by :meth:`CollisionModel.path_clearance`'s certificate
+(``path_is_clear``; not sampled at a resolution).
 The fitted B-spline is certified too; if it is not, more control points follow the polyline more
 closely.
 
