@@ -301,6 +301,52 @@ def test_a_first_path_through_a_via_point_at_a_limit_stays_within_the_limits() -
         assert report.passed, str(report)
 
 
+def test_via_points_on_a_path_along_a_limit_give_a_first_path_within_it() -> None:
+    """Four points of a panda plan whose joint 6 runs along its lower limit (two of them 7 and
+    9 nrad inside it): the first B-spline through them passes them exactly within the limits
+    (the correction after the bounded one spread its rounding over the control points at the
+    limit too, 1e-9 beyond it, and the request was refused), and the plan verifies."""
+    robot = load("panda")
+    lower, upper = robot.limits.position_lower, robot.limits.position_upper
+    q0 = [
+        -0.4693215968173048,
+        0.020258183122942697,
+        -1.2575643602887234,
+        -1.2100936552773918,
+        2.184723037869777,
+        1.0533391145468882,
+        -0.17230456672993721,
+    ]
+    qe = [
+        1.8153967240623792,
+        0.1449751464000637,
+        -0.36406433355468426,
+        -1.1666329448849615,
+        -2.174967269689126,
+        0.6870949724724299,
+        1.7213363863670827,
+    ]
+    via = np.array([
+        [0.2519228166470918, 0.011494781728777704, -1.8822128823522728, -0.7467461260618437,
+         1.3188879819273218, 0.2240036574988827, 0.6035909046429224],
+        [0.9816434160916723, -0.08954695054612306, -1.3459687802646836, -0.2581523112892924,
+         0.44322325953525304, -0.017499991064317204, 1.1626249817028718],
+        [1.7113509719210296, -0.07623502085560328, -0.6849039676945665, -0.40311725744487764,
+         -0.4324258100709056, -0.017499992830667627, 1.190041353491792],
+        [2.42278180026177, -0.07401130150477613, -0.9733327776738243, -1.110557168611919,
+         -1.3080913355925015, -0.013090439064309536, 1.1515272024347065],
+    ])  # fmt: skip
+    assert np.min(via[:, 5] - lower[5]) < 1e-8
+    result = nearopt.plan(robot, q0, qe, via=list(via), max_iterations=3)
+    c = result.path.control_points
+    assert np.all(c >= lower - 1e-12) and np.all(c <= upper + 1e-12)
+    np.testing.assert_allclose(result.trajectory(result.via_times, 0), via, rtol=0, atol=1e-12)
+    report = nearopt.verify(
+        result.trajectory, robot, q0=q0, qe=qe, waypoints=result.waypoints, simulate=False
+    )
+    assert report.passed, str(report)
+
+
 def test_every_target_is_checked_before_any_planning(tmp_path: Path) -> None:
     """A bad later target is reported before the first segment is planned, naming the file, the
     target and the field; a stop where the arm already is, likewise."""
