@@ -252,6 +252,49 @@ def test_via_points_are_passed_exactly_without_stopping(tmp_path: Path) -> None:
     )
 
 
+def test_a_tool_pose_via_point_is_solved_for_a_short_way_through_it() -> None:
+    """The tool pose of a panda cell plan's own configuration qm halfway: inverse kinematics
+    from the start alone came out on a far branch (the way q0 → via → qe 12.1 rad, the plan
+    then J 4.84 against 2.55); of the solutions from the start, the goal and their midpoint the
+    one with the shortest way is taken, about as short as through qm itself."""
+    robot = load("panda")
+    q0 = np.array(
+        [
+            1.0784977518341199,
+            -0.06236072564168671,
+            -1.739671809620453,
+            -1.3196409408895144,
+            1.1447182446131854,
+            2.179072289486437,
+            0.23904997069078027,
+        ]
+    )
+    qe = np.array(
+        [
+            1.9863495686780808,
+            1.2571233665879387,
+            1.7377757959902929,
+            -1.879060645801851,
+            -1.0765436221599132,
+            1.6373893793496446,
+            0.7153327663088236,
+        ]
+    )
+    qm = np.array([0.6538219027427153, -0.4306386612586585, 0.031378101812264074,
+                   -2.874165859413555, -0.626554167173879, 0.5748261889831564,
+                   -0.9950792101094225])  # fmt: skip
+    pose = pose_of(robot, qm)
+
+    def way(q: np.ndarray) -> float:
+        return float(np.linalg.norm(q - q0) + np.linalg.norm(qe - q))
+
+    result = nearopt.plan(robot, q0, qe, via=[pose], max_iterations=0)
+    qv = result.trajectory(np.array(result.via_times), 0)[0]
+    assert max(pose_error(robot, qv, pose)) < 1e-9
+    assert way(qv) < 0.8 * way(inverse_kinematics(robot, pose, seed=q0))
+    assert way(qv) <= 1.05 * way(qm)
+
+
 def test_a_step_is_put_back_onto_the_via_points_exactly() -> None:
     """Stage 2's model keeps the via-points to its own accuracy only (a kinova cell plan's
     iterates drifted 1.6e-8 rad off one, and verify asks 1e-8): each trial step is moved back

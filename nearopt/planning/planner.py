@@ -685,7 +685,7 @@ def _setup(
     if position_limits:
         robot.limits.check_within(q0, "q0")
         robot.limits.check_within(qe, "qe")
-    vias = _via_points(robot, via, q0, position_limits)
+    vias = _via_points(robot, via, q0, qe, position_limits)
     if vias and method != Method.SCP:
         raise ConfigurationError("via-points need method 'scp' (the B-spline path)")
     if np.array_equal(q0, qe) and not vias:
@@ -1014,10 +1014,13 @@ def _via_points(
     robot: Robot,
     via: Sequence[ArrayLike | ToolPose] | None,
     q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
     position_limits: bool,
 ) -> list[NDArray[np.float64]]:
-    """The via-points as joint vectors (tool poses by inverse kinematics from the previous
-    point), checked."""
+    """The via-points as joint vectors, checked; a tool pose by inverse kinematics: of the
+    solutions from the previous point, the next joint vector (a later via-point or qe) and
+    their midpoint, the one with the shortest way from the previous point to the next (from the
+    previous point alone, a panda pose on a plan's own path came out on a far branch: J 2×)."""
     if via is None:
         return []
     flat = isinstance(via, np.ndarray) and via.ndim == 1
@@ -1035,7 +1038,16 @@ def _via_points(
     previous = q0
     for k, point in enumerate(via):
         if isinstance(point, ToolPose):
-            q = inverse_kinematics(robot, point, seed=previous)
+            later = [v for v in via[k + 1 :] if not isinstance(v, ToolPose)]
+            after = robot.check_configuration(later[0], "a via-point") if later else qe
+            found = [
+                inverse_kinematics(robot, point, seed=seed)
+                for seed in (previous, after, 0.5 * (previous + after))
+            ]
+            q = min(
+                found,
+                key=lambda x: np.linalg.norm(x - previous) + np.linalg.norm(after - x),  # noqa: B023
+            )
         else:
             q = robot.check_configuration(point, f"via[{k}]")
         if position_limits:
