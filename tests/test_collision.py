@@ -391,6 +391,56 @@ def test_via_points_taken_from_a_cell_plans_path_cost_what_that_plan_costs() -> 
 
 
 @pytest.mark.slow
+def test_a_tool_pose_via_point_whose_nearest_solution_collides_takes_a_clear_one() -> None:
+    """The tool pose of a panda cell plan halfway (the work cell of bench_cell.py, its pair 1
+    of seed 13): the inverse-kinematics solution with the shortest way through it collides
+    (panda_link1 ↔ panda_hand, 3.5 mm); of the clear ones the shortest is taken, and the plan
+    through it costs about what the plan without it does (it was refused)."""
+    from test_goals import pose_of
+
+    cell = Scene(
+        (
+            Obstacle("table", Box((1.6, 1.6, 0.04)), (0.0, 0.0, -0.03)),
+            Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5)),
+            Obstacle("box", Box((0.25, 0.25, 0.25)), (0.3, -0.45, 0.125)),
+        ),
+        margin=0.01,
+    )
+    robot = load("panda")
+    q0 = np.array(
+        [
+            1.0784977518341199,
+            -0.06236072564168671,
+            -1.739671809620453,
+            -1.3196409408895144,
+            1.1447182446131854,
+            2.179072289486437,
+            0.23904997069078027,
+        ]
+    )
+    qe = np.array(
+        [
+            1.9863495686780808,
+            1.2571233665879387,
+            1.7377757959902929,
+            -1.879060645801851,
+            -1.0765436221599132,
+            1.6373893793496446,
+            0.7153327663088236,
+        ]
+    )
+    qm = np.array([0.6538219027427153, -0.4306386612586585, 0.031378101812264074,
+                   -2.874165859413555, -0.626554167173879, 0.5748261889831564,
+                   -0.9950792101094225])  # fmt: skip
+    cost = TorqueCost(0.001)
+    first = plan(robot, q0, qe, cost, scene=cell, time_limit=60.0)
+    through = plan(robot, q0, qe, cost, scene=cell, via=[pose_of(robot, qm)], time_limit=60.0)
+    assert through.J <= first.J * 1.01, (through.J, first.J)
+    assert through.clearance is not None and through.clearance.certified
+    assert nearopt.verify_plan(through).passed
+
+
+@pytest.mark.slow
 def test_self_collision_is_avoided_where_the_free_optimum_collides() -> None:
     robot = load("ur5")
     lo, hi = robot.limits.position_lower, robot.limits.position_upper

@@ -716,7 +716,11 @@ def _setup(
             qe = _clear_solution(robot, goal, q0, qe, collisions)
         collisions.check_configuration(qe, "goal configuration qe")
         for k_via, q_via in enumerate(vias):
-            collisions.check_configuration(q_via, f"via-point {k_via}")
+            if isinstance(via[k_via], ToolPose):  # another solution of the pose if it collides
+                before = vias[k_via - 1] if k_via else q0
+                after = vias[k_via + 1] if k_via + 1 < len(vias) else qe
+                vias[k_via] = _clear_via(robot, via[k_via], before, after, q_via, collisions)
+            collisions.check_configuration(vias[k_via], f"via-point {k_via}")
     return Segment(
         robot,
         q0,
@@ -1079,6 +1083,37 @@ def _clear_solution(
         if collisions.closest(q).distance >= collisions.margin:
             return q
     return qe
+
+
+def _clear_via(
+    robot: Robot,
+    pose: ToolPose,
+    before: NDArray[np.float64],
+    after: NDArray[np.float64],
+    q: NDArray[np.float64],
+    collisions: CollisionModel,
+    tries: int = 20,
+) -> NDArray[np.float64]:
+    """A tool-pose via-point's solution clear of the margin: ``q`` if it is, else of the
+    solutions from ``before``, ``after``, their midpoint and seeded random starts the clear one
+    with the shortest way from ``before`` to ``after`` (``q`` when none is: the caller reports
+    it)."""
+    if collisions.closest(q).distance >= collisions.margin:
+        return q
+    rng = np.random.default_rng(20261124)
+    lower, upper = robot.limits.sampling_box()
+    seeds = [before, after, 0.5 * (before + after)]
+    seeds += [rng.uniform(lower, upper) for _ in range(tries)]
+    best, shortest = q, np.inf
+    for seed in seeds:
+        try:
+            x = inverse_kinematics(robot, pose, seed=seed, attempts=3)
+        except UnreachablePoseError:
+            continue
+        way = np.linalg.norm(x - before) + np.linalg.norm(after - x)
+        if way < shortest and collisions.closest(x).distance >= collisions.margin:
+            best, shortest = x, way
+    return best
 
 
 GRID_TRUST = 5e-3
