@@ -715,12 +715,7 @@ def _setup(
         if goal is not None:  # another solution of the pose if the first one collides
             qe = _clear_solution(robot, goal, q0, qe, collisions)
         collisions.check_configuration(qe, "goal configuration qe")
-        for k_via, q_via in enumerate(vias):
-            if isinstance(via[k_via], ToolPose):  # another solution of the pose if it collides
-                before = vias[k_via - 1] if k_via else q0
-                after = vias[k_via + 1] if k_via + 1 < len(vias) else qe
-                vias[k_via] = _clear_via(robot, via[k_via], before, after, q_via, collisions)
-            collisions.check_configuration(vias[k_via], f"via-point {k_via}")
+        _check_vias(robot, via, vias, q0, qe, collisions)
     return Segment(
         robot,
         q0,
@@ -1083,6 +1078,25 @@ def _clear_solution(
         if collisions.closest(q).distance >= collisions.margin:
             return q
     return qe
+
+
+def _check_vias(
+    robot: Robot,
+    via: Sequence[ArrayLike | ToolPose] | None,
+    vias: list[NDArray[np.float64]],
+    q0: NDArray[np.float64],
+    qe: NDArray[np.float64],
+    collisions: CollisionModel,
+) -> None:
+    """Every via-point clear of the margin, or a :class:`~nearopt.CollisionError` naming it; a
+    tool pose's solution that collides replaced (in ``vias``) by a clear one
+    (:func:`_clear_via`)."""
+    for k, q in enumerate(vias):
+        if via is not None and isinstance(via[k], ToolPose):
+            before = vias[k - 1] if k else q0
+            after = vias[k + 1] if k + 1 < len(vias) else qe
+            vias[k] = _clear_via(robot, via[k], before, after, q, collisions)
+        collisions.check_configuration(vias[k], f"via-point {k}")
 
 
 def _clear_via(
