@@ -41,6 +41,16 @@ CELL = Scene(
     margin=0.01,
 )
 
+# the work cell of scripts/bench_cell.py (table, post and a box)
+WORK_CELL = Scene(
+    (
+        Obstacle("table", Box((1.6, 1.6, 0.04)), (0.0, 0.0, -0.03)),
+        Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5)),
+        Obstacle("box", Box((0.25, 0.25, 0.25)), (0.3, -0.45, 0.125)),
+    ),
+    margin=0.01,
+)
+
 # start and goal on either side of the post, the straight line through it
 MOTIONS = {
     "ur5": ([-0.8, -1.2, 1.2, -1.5, -1.57, 0.0], [0.8, -1.2, 1.2, -1.5, -1.57, 0.0]),
@@ -363,14 +373,7 @@ def test_via_points_taken_from_a_cell_plans_path_cost_what_that_plan_costs() -> 
     the plan's own, costs it). Two of the straight legs between them collide; a single OMPL
     search per leg went the long way round and the first path needed 128 control points: J
     4.73 against 2.53 before each leg became the shortest of three searches."""
-    cell = Scene(
-        (
-            Obstacle("table", Box((1.6, 1.6, 0.04)), (0.0, 0.0, -0.03)),
-            Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5)),
-            Obstacle("box", Box((0.25, 0.25, 0.25)), (0.3, -0.45, 0.125)),
-        ),
-        margin=0.01,
-    )
+    cell = WORK_CELL
     robot = load("panda")
     q0 = np.array([2.1677, 0.2651, 0.8038, -1.8751, -1.4689, 1.0357, 1.0229])
     qe = np.array([-0.8113, 0.5404, 0.01, -1.6933, 2.1678, 0.7182, -0.0595])
@@ -396,42 +399,11 @@ def test_a_tool_pose_via_point_whose_nearest_solution_collides_takes_a_clear_one
     of seed 13): the inverse-kinematics solution with the shortest way through it collides
     (panda_link1 ↔ panda_hand, 3.5 mm); of the clear ones the shortest is taken, and the plan
     through it costs about what the plan without it does (it was refused)."""
-    from test_goals import pose_of
+    from test_goals import PANDA_HALFWAY, pose_of
 
-    cell = Scene(
-        (
-            Obstacle("table", Box((1.6, 1.6, 0.04)), (0.0, 0.0, -0.03)),
-            Obstacle("post", Cylinder(0.05, 1.0), (0.45, 0.0, 0.5)),
-            Obstacle("box", Box((0.25, 0.25, 0.25)), (0.3, -0.45, 0.125)),
-        ),
-        margin=0.01,
-    )
+    cell = WORK_CELL
     robot = load("panda")
-    q0 = np.array(
-        [
-            1.0784977518341199,
-            -0.06236072564168671,
-            -1.739671809620453,
-            -1.3196409408895144,
-            1.1447182446131854,
-            2.179072289486437,
-            0.23904997069078027,
-        ]
-    )
-    qe = np.array(
-        [
-            1.9863495686780808,
-            1.2571233665879387,
-            1.7377757959902929,
-            -1.879060645801851,
-            -1.0765436221599132,
-            1.6373893793496446,
-            0.7153327663088236,
-        ]
-    )
-    qm = np.array([0.6538219027427153, -0.4306386612586585, 0.031378101812264074,
-                   -2.874165859413555, -0.626554167173879, 0.5748261889831564,
-                   -0.9950792101094225])  # fmt: skip
+    q0, qe, qm = PANDA_HALFWAY
     cost = TorqueCost(0.001)
     first = plan(robot, q0, qe, cost, scene=cell, time_limit=60.0)
     through = plan(robot, q0, qe, cost, scene=cell, via=[pose_of(robot, qm)], time_limit=60.0)

@@ -252,37 +252,25 @@ def test_via_points_are_passed_exactly_without_stopping(tmp_path: Path) -> None:
     )
 
 
+# a panda start and goal (pair 1 of bench_cell.py's seed 13) and its cell plan's configuration
+# halfway (clear, on the plan's own path)
+PANDA_HALFWAY = (
+    np.array([1.0784977518341199, -0.06236072564168671, -1.739671809620453,
+              -1.3196409408895144, 1.1447182446131854, 2.179072289486437, 0.23904997069078027]),
+    np.array([1.9863495686780808, 1.2571233665879387, 1.7377757959902929,
+              -1.879060645801851, -1.0765436221599132, 1.6373893793496446, 0.7153327663088236]),
+    np.array([0.6538219027427153, -0.4306386612586585, 0.031378101812264074,
+              -2.874165859413555, -0.626554167173879, 0.5748261889831564, -0.9950792101094225]),
+)  # fmt: skip
+
+
 def test_a_tool_pose_via_point_is_solved_for_a_short_way_through_it() -> None:
     """The tool pose of a panda cell plan's own configuration qm halfway: inverse kinematics
     from the start alone came out on a far branch (the way q0 → via → qe 12.1 rad, the plan
     then J 4.84 against 2.55); of the solutions from the start, the goal and their midpoint the
     one with the shortest way is taken, about as short as through qm itself."""
     robot = load("panda")
-    q0 = np.array(
-        [
-            1.0784977518341199,
-            -0.06236072564168671,
-            -1.739671809620453,
-            -1.3196409408895144,
-            1.1447182446131854,
-            2.179072289486437,
-            0.23904997069078027,
-        ]
-    )
-    qe = np.array(
-        [
-            1.9863495686780808,
-            1.2571233665879387,
-            1.7377757959902929,
-            -1.879060645801851,
-            -1.0765436221599132,
-            1.6373893793496446,
-            0.7153327663088236,
-        ]
-    )
-    qm = np.array([0.6538219027427153, -0.4306386612586585, 0.031378101812264074,
-                   -2.874165859413555, -0.626554167173879, 0.5748261889831564,
-                   -0.9950792101094225])  # fmt: skip
+    q0, qe, qm = PANDA_HALFWAY
     pose = pose_of(robot, qm)
 
     def way(q: np.ndarray) -> float:
