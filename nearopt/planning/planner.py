@@ -18,8 +18,9 @@ update (stage 2) is one of :class:`~nearopt.planning.Method`:
 
 from __future__ import annotations
 
+import itertools
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
 from typing import TYPE_CHECKING
 
@@ -1068,16 +1069,28 @@ def _clear_solution(
     else one from seeded random starts (``qe`` when none is: the caller reports it)."""
     if collisions.closest(qe).distance >= collisions.margin:
         return qe
+    return next(_clear_solutions(robot, goal, collisions, [], tries), qe)
+
+
+def _clear_solutions(
+    robot: Robot,
+    pose: ToolPose,
+    collisions: CollisionModel,
+    seeds: list[NDArray[np.float64]],
+    tries: int,
+) -> Iterator[NDArray[np.float64]]:
+    """The pose's inverse-kinematics solutions clear of the margin, from ``seeds`` and then
+    from ``tries`` seeded random starts (drawn as they are needed)."""
     rng = np.random.default_rng(20261124)
     lower, upper = robot.limits.sampling_box()
-    for _ in range(tries):
+    starts = itertools.chain(seeds, (rng.uniform(lower, upper) for _ in range(tries)))
+    for seed in starts:
         try:
-            q = inverse_kinematics(robot, goal, seed=rng.uniform(lower, upper), attempts=3)
+            q = inverse_kinematics(robot, pose, seed=seed, attempts=3)
         except UnreachablePoseError:
             continue
         if collisions.closest(q).distance >= collisions.margin:
-            return q
-    return qe
+            yield q
 
 
 def _check_vias(
@@ -1114,20 +1127,13 @@ def _clear_via(
     it)."""
     if collisions.closest(q).distance >= collisions.margin:
         return q
-    rng = np.random.default_rng(20261124)
-    lower, upper = robot.limits.sampling_box()
     seeds = [before, after, 0.5 * (before + after)]
-    seeds += [rng.uniform(lower, upper) for _ in range(tries)]
-    best, shortest = q, np.inf
-    for seed in seeds:
-        try:
-            x = inverse_kinematics(robot, pose, seed=seed, attempts=3)
-        except UnreachablePoseError:
-            continue
-        way = np.linalg.norm(x - before) + np.linalg.norm(after - x)
-        if way < shortest and collisions.closest(x).distance >= collisions.margin:
-            best, shortest = x, way
-    return best
+    found = _clear_solutions(robot, pose, collisions, seeds, tries)
+    return min(
+        found,
+        key=lambda x: np.linalg.norm(x - before) + np.linalg.norm(after - x),
+        default=q,
+    )
 
 
 GRID_TRUST = 5e-3
