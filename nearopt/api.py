@@ -553,6 +553,11 @@ class Prepared:
             "the joint limits file": request.joint_limits,
         }
         out = {what: Path(path) for what, path in files.items() if path is not None}
+        # a robot named (--robot) is read from its own URDF and SRDF: inputs as much as given ones
+        robot_files = {"the URDF": self.robot.urdf_path, "the SRDF": self.robot.srdf}
+        for what, path in robot_files.items():
+            if path is not None and what not in out:
+                out[f"{what} of {self.robot.name}" if request.robot else what] = Path(path)
         for mesh in _urdf_meshes(self.robot):  # by its name, or its path where names repeat
             what = f"a mesh of the URDF ({mesh.name})"
             out[f"a mesh of the URDF ({mesh})" if what in out else what] = mesh

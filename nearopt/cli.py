@@ -368,7 +368,10 @@ def _output_options(p: argparse.ArgumentParser) -> None:
     p.add_argument("--csv", metavar="FILE", help="write the same samples as CSV (- likewise)")
     p.add_argument("--rate", type=float, default=1000.0, help="JSON/CSV sampling rate [Hz] (1000)")
     p.add_argument(
-        "--plots", metavar="DIR", help="write torques.png, speeds.png, workspace.png, history.png"
+        "--plots",
+        metavar="DIR",
+        help="write torques.png, speeds.png, workspace.png, history.png (and accelerations.png, "
+        "jerks.png, torque_rates.png where the arm has such limits)",
     )
     p.add_argument("--html", metavar="FILE", help="write the animation as a standalone HTML file")
     p.add_argument(
@@ -536,8 +539,26 @@ def _check_output_places(args: argparse.Namespace) -> tuple[dict[str, Output], P
     }
     plots = _plots_folder(args.plots) if args.plots else None
     if plots is not None and plots.is_dir():
+        from .viz.figures import FIGURE_NAMES
+
         roles.update({f"--plots {name}": plots / name for name in FIGURE_NAMES})
+    if args.ros_bag:  # the bag replaces its folder whole, with whatever was written into it
+        _refuse_in_bag(Path(args.ros_bag), {**roles, **({"--plots": plots} if plots else {})})
     return check_outputs(roles), plots
+
+
+def _refuse_in_bag(bag: Path, outputs: dict[str, str | Path]) -> None:
+    """A ConfigurationError where an output is the ``--ros-bag`` folder or lies in it."""
+    folder = bag.expanduser().resolve()
+    for role, target in outputs.items():
+        if str(target) == "-":
+            continue
+        place = Path(target).expanduser().resolve()
+        if place == folder or folder in place.parents:
+            raise ConfigurationError(
+                f"{role} {target} is in the --ros-bag folder {bag}, which the bag replaces "
+                "whole: give a place outside it"
+            )
 
 
 def _print_summary(result: PlanResult | TaskResult, out: TextIO) -> None:
@@ -714,9 +735,6 @@ def _batch_command(args: argparse.Namespace) -> int:
         more = f"{unlisted} more failed" if unlisted > 0 else "more"
         print(f"  … {more}: {Path(args.out) / 'summary.csv'} lists every one", file=sys.stderr)
     return 1 if summary.failed else 0
-
-
-FIGURE_NAMES = ("torques.png", "workspace.png", "history.png")
 
 
 def _plots_folder(target: str) -> Path:

@@ -204,24 +204,49 @@ class BagContents:
     messages: dict[str, int]
 
 
+BAG_SUFFIXES = (".mcap", ".db3", ".zstd")
+"""The storage files a rosbag2 folder holds beside its ``metadata.yaml`` (MCAP, SQLite 3, and
+either compressed)."""
+
+
 def check_bag_folder(folder: str | Path) -> Path:
-    """``folder`` as a place for a bag: refused if it exists and is neither a rosbag2 folder nor
-    empty (what it holds would be replaced, and lost).
+    """``folder`` as a place for a bag: refused if it exists and is neither empty nor a rosbag2
+    folder — its ``metadata.yaml`` and storage files (:data:`BAG_SUFFIXES`) and nothing else —
+    (what it holds would be replaced, and lost), or if this process runs in it (the current
+    folder, or one inside it: it cannot be replaced).
 
     Raises
     ------
     ConfigurationError
-        Naming the folder.
+        Naming the folder (and what else it holds).
     """
     folder = Path(folder)
     if str(folder) in ("", "-"):
         raise ConfigurationError(f"a bag is a folder: give its path, got {str(folder)!r}")
-    if folder.exists() and not (
-        folder.is_dir() and ((folder / "metadata.yaml").is_file() or not any(folder.iterdir()))
-    ):
+    here = Path.cwd().resolve()
+    if folder.exists() and (folder.resolve() == here or folder.resolve() in here.parents):
         raise ConfigurationError(
-            f"{folder} exists and is not a rosbag2 folder: it would be replaced; give another"
+            f"{folder} is the folder this command runs in (or holds it): a bag replaces its "
+            "folder whole; give a folder of its own"
         )
+    if folder.exists() and not folder.is_dir():
+        raise ConfigurationError(f"{folder} exists and is not a folder: a bag is a folder")
+    if folder.exists() and any(folder.iterdir()):
+        if not (folder / "metadata.yaml").is_file():
+            raise ConfigurationError(
+                f"{folder} exists and is not a rosbag2 folder: it would be replaced; give another"
+            )
+        other = sorted(
+            p.name
+            for p in folder.iterdir()
+            if p.name != "metadata.yaml" and not (p.is_file() and p.suffix in BAG_SUFFIXES)
+        )
+        if other:
+            raise ConfigurationError(
+                f"{folder} holds {other[0]!r}"
+                + (f" and {len(other) - 1} more" if len(other) > 1 else "")
+                + " besides a bag: the bag replaces the folder whole; give another"
+            )
     return folder
 
 

@@ -202,3 +202,15 @@ def test_single_plans_and_tasks_are_plans(tmp_path: Path) -> None:
         assert isinstance(result, nearopt.Plan)
         assert result.iterations == sum(len(p.history) - 1 for p in result.parts)
     assert single.parts == (single,) and chained.parts == chained.segments
+
+
+def test_a_named_robots_own_urdf_and_srdf_are_inputs_no_output_may_replace() -> None:
+    """``--robot ur5 --json …/ur5_robot.urdf`` wrote the plan over the bundled URDF: the files a
+    robot named by its catalogue name is read from are the request's inputs too."""
+    from nearopt.api import prepare
+
+    prepared = prepare(PlanRequest(robot="ur5", q0=(0.0,) * 6, qe=(0.3,) * 6))
+    files = prepared.input_files()
+    assert files["the URDF of ur5"] == prepared.robot.urdf_path
+    assert files["the SRDF of ur5"] == prepared.robot.srdf
+    assert prepared.robot.urdf_path.name == "ur5_robot.urdf"

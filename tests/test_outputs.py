@@ -90,8 +90,10 @@ def test_devices_stay_devices() -> None:
         (["--json", "{p}/same", "--csv", "{p}/same"], "--json and --csv would both write"),
         (["--json", "-", "--csv", "/dev/stdout"], "--json and --csv would both write"),
         (["--json", "{p}/link-to-same", "--csv", "{p}/same"], "would both write"),
+        (["--plots", "{p}", "--json", "{p}/speeds.png"], "--json and --plots speeds.png"),
+        (["--plots", "{p}", "--csv", "{p}/jerks.png"], "--csv and --plots jerks.png"),
     ],
-    ids=["same path", "stdout twice", "a link to the other"],
+    ids=["same path", "stdout twice", "a link to the other", "a figure", "a figure not drawn"],
 )
 def test_two_outputs_to_one_place_are_refused(
     tmp_path: Path, outputs: list[str], says: str

@@ -6,6 +6,8 @@ conditions) against the planned motion at 10 kHz, and the goal YAML through a YA
 from __future__ import annotations
 
 import json
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -203,6 +205,11 @@ def test_an_existing_bag_is_replaced_and_anything_else_refused(
     with pytest.raises(nearopt.ConfigurationError, match="is not a rosbag2 folder"):
         write_ros_bag(result, other)
     assert (other / "keep.txt").read_text() == "mine"
+    (other / "metadata.yaml").write_text("name: mine")  # a metadata.yaml alone makes no bag
+    (other / "images").mkdir()
+    with pytest.raises(nearopt.ConfigurationError, match="holds 'images' and 1 more besides a"):
+        write_ros_bag(result, other)
+    assert sorted(p.name for p in other.iterdir()) == ["images", "keep.txt", "metadata.yaml"]
     with pytest.raises(nearopt.ConfigurationError, match="rate"):
         write_ros_bag(result, tmp_path / "x", rate=0.0)
     with pytest.raises(nearopt.ConfigurationError, match="tolerance"):
@@ -241,6 +248,19 @@ def test_the_command_line_writes_the_goal_and_the_bag(tmp_path: Path) -> None:
         "is not a rosbag2 folder: it would be replaced; give another"
     )
     assert not (tmp_path / "g2.yaml").exists()
+    assert [p.name for p in (tmp_path / "other").iterdir()] == ["notes.txt"]
+    for inside in (["--json", "bag/p.json"], ["--plots", "bag"], ["--csv", "bag"]):
+        again = run(
+            *plan, "--ros-bag", str(tmp_path / "bag"), *inside[:1], str(tmp_path / inside[1])
+        )
+        assert again.returncode == 2
+        assert "which the bag replaces whole: give a place outside it" in again.stderr
+    assert sorted(p.name for p in (tmp_path / "bag").iterdir()) == ["bag_0.mcap", "metadata.yaml"]
+    here = subprocess.run(
+        [sys.executable, "-m", "nearopt.cli", *plan, "--ros-bag", "."],
+        capture_output=True, text=True, timeout=600, cwd=tmp_path / "other",
+    )  # fmt: skip
+    assert here.returncode == 2 and "is the folder this command runs in" in here.stderr
     assert [p.name for p in (tmp_path / "other").iterdir()] == ["notes.txt"]
 
 

@@ -45,7 +45,20 @@ __all__ = [
     "plot_history",
     "render_figures",
     "save_figures",
+    "FIGURE_NAMES",
 ]
+
+FIGURE_NAMES = (
+    "torques.png",
+    "speeds.png",
+    "accelerations.png",
+    "jerks.png",
+    "torque_rates.png",
+    "workspace.png",
+    "history.png",
+)
+"""Every file :func:`render_figures` may write (the acceleration, jerk and torque-rate figures
+where the robot has such limits): places no other output may take."""
 
 
 def _pyplot():  # noqa: ANN202 - the module, imported lazily
