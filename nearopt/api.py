@@ -640,9 +640,9 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
             f"--weights needs one weight per joint of {robot.name} ({robot.n}), "
             f"got {len(request.weights)}"
         )
-    task = Task.from_file(request.task) if request.task is not None else None
+    task = Task.from_file(request.task).for_robot(robot) if request.task is not None else None
     if request.q0 is not None:
-        q0 = _joint_values(request.q0, request.deg)
+        q0 = _joint_values(request.q0, request.deg, robot)
     elif task is not None and task.start is not None:
         q0 = robot.check_configuration(task.start, f"{request.task}: start")
     else:
@@ -655,7 +655,7 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
         qe = ToolPose(list(pose[:3]), list(pose[3:]) or None, request.frame)
         robot.frame_id(request.frame)  # an unknown frame is named before any work
     elif request.qe is not None:
-        qe = _joint_values(request.qe, request.deg)
+        qe = _joint_values(request.qe, request.deg, robot)
     else:  # every target is checked before any work
         check_targets(
             robot,
@@ -665,7 +665,7 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
             velocity_limits=not request.no_velocity_limits,
         )
     scene = Scene.from_file(request.scene) if request.scene is not None else None
-    via = [_joint_values(v, request.deg) for v in request.via]
+    via = [_joint_values(v, request.deg, robot) for v in request.via]
     if request.deg:  # said in the request's units (the planner would say rad)
         _check_in_degrees(robot, request, q0, qe, via)
     whole = (robot.n,)
@@ -675,8 +675,16 @@ def prepare(request: PlanRequest, robot_loader: RobotLoader | None = None) -> Pr
     return Prepared(request, robot, q0, qe, task, scene, request.cost(), via)
 
 
-def _joint_values(values: tuple[float, ...], deg: bool) -> NDArray[np.float64]:
-    return np.deg2rad(values) if deg else np.asarray(values, dtype=float)
+def _joint_values(values: tuple[float, ...], deg: bool, robot: Robot) -> NDArray[np.float64]:
+    """Joint values (positions or velocities) in rad (rad/s) or m (m/s): a ``--deg`` request's
+    revolute joints' converted from degrees, its prismatic joints' as given (m, m/s). A wrong
+    count is left to the planner's checks, which name it."""
+    q = np.asarray(values, dtype=float)
+    if not deg:
+        return q
+    if q.shape != (robot.n,):
+        return np.deg2rad(q)
+    return np.where(robot.prismatic, q, np.deg2rad(q))
 
 
 def _check_in_degrees(
@@ -695,10 +703,10 @@ def _check_in_degrees(
             points.append(("qe", qe))
         for what, q in points:
             if q.shape == (robot.n,):
-                robot.limits.check_within(q, what, degrees=True)
+                robot.limits.check_within(q, what, degrees=True, prismatic=robot.prismatic)
     for what, given in (("qd0", request.qd0), ("qde", request.qde)):
         if given is not None and not request.no_velocity_limits and len(given) == robot.n:
-            check_velocity(robot, np.deg2rad(given), what, True, degrees=True)
+            check_velocity(robot, _joint_values(given, True, robot), what, True, degrees=True)
 
 
 def solve(
@@ -738,6 +746,10 @@ def solve(
             settings,
             callback=segment_callback,
         )
+    qd0, qde = (
+        None if v is None else _joint_values(v, request.deg, prepared.robot)
+        for v in (request.qd0, request.qde)
+    )
     return plan(
         prepared.robot,
         prepared.q0,
@@ -747,8 +759,8 @@ def solve(
         via=prepared.via,
         duration=request.duration,
         max_duration=request.max_duration,
-        qd0=None if request.qd0 is None else _joint_values(request.qd0, request.deg),
-        qde=None if request.qde is None else _joint_values(request.qde, request.deg),
+        qd0=qd0,
+        qde=qde,
         **settings.keywords(),
     )  # type: ignore[arg-type]
 

@@ -235,7 +235,8 @@ def _motion_options(p: argparse.ArgumentParser) -> None:
     p.add_argument(
         "--deg",
         action="store_true",
-        help="q0, qe, --via are in degrees, --qd0, --qde in deg/s (default rad, rad/s)",
+        help="q0, qe, --via are in degrees, --qd0, --qde in deg/s (default rad, rad/s); a "
+        "prismatic joint's stay in m, m/s",
     )
 
 

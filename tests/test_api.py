@@ -204,6 +204,44 @@ def test_single_plans_and_tasks_are_plans(tmp_path: Path) -> None:
     assert single.parts == (single,) and chained.parts == chained.segments
 
 
+PRISMATIC_LIMIT = '<limit effort="50" velocity="1" lower="-0.1" upper="0.3"/>'
+
+
+def test_degrees_are_a_revolute_joints_and_a_prismatic_joint_stays_in_metres(
+    tmp_path: Path,
+) -> None:
+    """``--deg`` (and a task file's ``units = "deg"``) convert the revolute joints' values only:
+    a prismatic joint's goal of 0.2 m was planned to 0.2·π/180 m, and 0.5 m beyond its 0.3 m
+    limit was taken. Its limit error says m."""
+    from urdfs import LIMIT, write_urdf
+
+    from nearopt.api import prepare
+    from nearopt.planning import Task
+
+    urdf = str(
+        write_urdf(tmp_path, types=("revolute", "prismatic"), limits=(LIMIT, PRISMATIC_LIMIT))
+    )
+    given = PlanRequest(urdf=urdf, q0=(0.0, 0.0), qe=(30.0, 0.2), via=((10.0, 0.1),), deg=True)
+    prepared = prepare(given)
+    np.testing.assert_allclose(prepared.qe, [np.pi / 6, 0.2], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(prepared.via[0], [np.pi / 18, 0.1], rtol=0, atol=1e-15)
+    with pytest.raises(nearopt.ConfigurationError, match=r"qe\[1\] = 0.5 m is outside .* m of"):
+        prepare(dataclasses.replace(given, qe=(30.0, 0.5)))
+    task = tmp_path / "t.toml"
+    task.write_text(
+        'units = "deg"\nstart = [0, 0.05]\n[[target]]\nq = [30, 0.2]\nstop = false\n'
+        "velocity = [10, 0.1]\n[[target]]\nq = [-20, 0.1]\n"
+    )
+    robot = nearopt.Robot.from_urdf(urdf)
+    read = Task.from_file(task).for_robot(robot)
+    np.testing.assert_allclose(read.start, [0.0, 0.05], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(read.targets[0].goal, [np.pi / 6, 0.2], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(read.targets[0].velocity, [np.pi / 18, 0.1], rtol=0, atol=1e-15)
+    from_file = prepare(PlanRequest(urdf=urdf, task=str(task)))
+    np.testing.assert_allclose(from_file.q0, [0.0, 0.05], rtol=0, atol=1e-15)
+    np.testing.assert_allclose(from_file.task.targets[1].goal, [-np.pi / 9, 0.1], atol=1e-15)
+
+
 def test_a_named_robots_own_urdf_and_srdf_are_inputs_no_output_may_replace() -> None:
     """``--robot ur5 --json …/ur5_robot.urdf`` wrote the plan over the bundled URDF: the files a
     robot named by its catalogue name is read from are the request's inputs too."""

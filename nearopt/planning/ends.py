@@ -455,7 +455,9 @@ def check_velocity(
     if np.any(over > 0.0):
         i = int(np.argmax(over))
         unit, given, most = ("rad/s", v[i], limit[i])
-        if degrees:
+        if robot.prismatic[i]:
+            unit = "m/s"
+        elif degrees:
             unit, given, most = ("deg/s", *np.rad2deg([v[i], limit[i]]))
         raise ConfigurationError(
             f"{name} of joint {robot.joint_names[i]!r} is {given:.6g} {unit}, beyond its speed "

@@ -684,8 +684,8 @@ def _setup(
         qe = inverse_kinematics(robot, goal, seed=q0)
     qe = robot.check_configuration(qe, "qe")
     if position_limits:
-        robot.limits.check_within(q0, "q0")
-        robot.limits.check_within(qe, "qe")
+        robot.limits.check_within(q0, "q0", prismatic=robot.prismatic)
+        robot.limits.check_within(qe, "qe", prismatic=robot.prismatic)
     vias = _via_points(robot, via, q0, qe, position_limits)
     if vias and method != Method.SCP:
         raise ConfigurationError("via-points need method 'scp' (the B-spline path)")
@@ -1051,7 +1051,7 @@ def _via_points(
         else:
             q = robot.check_configuration(point, f"via[{k}]")
         if position_limits:
-            robot.limits.check_within(q, f"via[{k}]")
+            robot.limits.check_within(q, f"via[{k}]", prismatic=robot.prismatic)
         out.append(q)
         previous = q
     return out

@@ -12,7 +12,8 @@ A task file (TOML; joint values in ``units``, poses in metres and a quaternion (
 the base frame)::
 
     start = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]   # optional: θ0 (the CLI's --q0)
-    units = "rad"                      # or "deg": of start, every q and velocity
+    units = "rad"                      # or "deg": of start, every q and velocity (a
+                                       # prismatic joint's in m and m/s either way)
     frame = "panda_hand_tcp"           # optional: the frame the poses place (default: the tip)
     [[target]]
     name = "approach"
@@ -110,6 +111,35 @@ class Task:
     targets: tuple[Target, ...]
     start: tuple[float, ...] | None = None
     source: Path | None = None
+    degrees: bool = False
+    """Read with ``units = "deg"``: every joint value was converted from degrees, so a prismatic
+    joint's (given in m and m/s) is put back by :meth:`for_robot`."""
+
+    def for_robot(self, robot: Robot) -> Task:
+        """This task in the robot's units: a ``units = "deg"`` file's prismatic joints' values
+        (start, q, velocity) as given, in m and m/s, not converted as degrees (the file is read
+        without the robot); the task itself otherwise, or where a vector's length is not the
+        robot's (the checks after this name it)."""
+        linear = robot.prismatic
+        if not self.degrees or not np.any(linear):
+            return self
+
+        def back(values: ArrayLike | None) -> ArrayLike | None:
+            if values is None or np.shape(values) != (robot.n,):
+                return values
+            return np.where(linear, np.rad2deg(values), values)
+
+        targets = tuple(
+            replace(
+                t,
+                goal=t.goal if isinstance(t.goal, ToolPose) else back(t.goal),
+                velocity=back(t.velocity),
+            )
+            for t in self.targets
+        )
+        start = back(self.start)
+        start = None if start is None else tuple(float(x) for x in start)  # type: ignore[union-attr]
+        return replace(self, targets=targets, start=start, degrees=False)
 
     @classmethod
     def from_file(cls, path: str | Path) -> Task:
@@ -210,7 +240,7 @@ class Task:
             if "window" in entry:
                 window = _window(entry["window"], path, name)
             targets.append(Target(goal, stop, name, velocity, window))  # type: ignore[arg-type]
-        return cls(tuple(targets), start, path)
+        return cls(tuple(targets), start, path, units == "deg")
 
 
 def _window(value: object, path: Path, target: str) -> tuple[float, float]:
@@ -452,6 +482,8 @@ def plan_task(
             f"settings must be a nearopt.PlanSettings, got {type(settings).__name__} "
             f"{settings!r:.60}"
         )
+    if isinstance(targets, Task):
+        targets = targets.for_robot(robot)
     try:
         records = _targets(targets.targets if isinstance(targets, Task) else targets)
     except ConfigurationError as exc:  # a task file's: named

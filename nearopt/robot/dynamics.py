@@ -159,17 +159,26 @@ class JointLimits:
     def _joint(self, i: int) -> str | None:
         return self.names[i] if self.names else None
 
-    def check_within(self, q: ArrayLike, what: str = "q", degrees: bool = False) -> None:
+    def check_within(
+        self,
+        q: ArrayLike,
+        what: str = "q",
+        degrees: bool = False,
+        prismatic: ArrayLike | None = None,
+    ) -> None:
         """Raise a :class:`~nearopt.ConfigurationError` naming the first joint of ``q`` (n,)
-        outside its position limits, its value and the limits (in degrees with ``degrees``:
-        a request given in them)."""
+        outside its position limits, its value and the limits (a revolute joint's in degrees
+        with ``degrees``: a request given in them; a ``prismatic`` joint's in m)."""
         q = np.asarray(q, dtype=float)
         outside = ~((self.position_lower <= q) & (q <= self.position_upper))
         if np.any(outside):
             i = int(np.argmax(outside))
-            unit, suffix = ("deg", " deg") if degrees else ("rad", "")
+            linear = prismatic is not None and bool(np.asarray(prismatic)[i])
+            unit, suffix = ("deg", " deg") if degrees and not linear else ("rad", "")
+            if linear:
+                unit, suffix = "m", " m"
             value, low, high = (q[i], self.position_lower[i], self.position_upper[i])
-            if degrees:
+            if degrees and not linear:
                 value, low, high = np.rad2deg([value, low, high])
             raise ConfigurationError(
                 f"{what}[{i}] = {value:.6g} {unit} is outside the position limits "
@@ -624,6 +633,13 @@ class Robot:
     def joint_names(self) -> list[str]:
         """Names of the n joints, in the order of every joint vector."""
         return list(self._model.names)[1:]
+
+    @property
+    def prismatic(self) -> NDArray[np.bool_]:
+        """Which joints are prismatic (their units are m, m/s, N instead of rad, rad/s, N·m),
+        shape (n,)."""
+        kinds = [self._model.joints[j].shortname() for j in range(1, self._model.njoints)]
+        return np.array([k.startswith("JointModelP") for k in kinds][: self.n], dtype=bool)
 
     @property
     def gravity(self) -> NDArray[np.float64]:

@@ -70,8 +70,7 @@ def _pyplot():  # noqa: ANN202 - the module, imported lazily
 
 def prismatic(robot: Robot) -> NDArray[np.bool_]:
     """Which joints are prismatic (their units are m, m/s, N instead of rad, rad/s, N·m), (n,)."""
-    kinds = [robot.model.joints[j].shortname() for j in range(1, robot.model.njoints)]
-    return np.array(["Prismatic" in k or k.startswith("JointModelP") for k in kinds][: robot.n])
+    return robot.prismatic
 
 
 def _joint_panels(
