@@ -69,7 +69,8 @@ class TorqueCost:
             ) from None
         if w.ndim != 1 or not np.all(np.isfinite(w)) or np.any(w < 0):
             what = "beta" if weights is None else "weights"
-            raise ConfigurationError(f"{what} must be finite and ≥ 0, got {w.tolist()}")
+            given = float(w[0]) if weights is None else w.tolist()
+            raise ConfigurationError(f"{what} must be finite and ≥ 0, got {given}")
         self._w = w
         self._w.setflags(write=False)
         self.beta = None if beta is None else float(beta)

@@ -280,13 +280,37 @@ CASES = {
         lambda p: nearopt.TorqueCost(-0.03),
         lambda p: ["--robot", "two_link", *PAPER, "--beta", "-0.03"],
         ConfigurationError,
-        "beta must be finite and ≥ 0",
+        "beta must be finite and ≥ 0, got -0.03",
     ),
     "NaN beta": Case(
         lambda p: nearopt.TorqueCost(float("nan")),
         lambda p: ["--robot", "two_link", *PAPER, "--beta", "nan"],
         ConfigurationError,
         "beta must be finite and ≥ 0",
+    ),
+    "a via-point at the start": Case(
+        lambda p: plan(*GOOD, via=[THETA_E * 0.5, THETA_E * 0.5]),
+        lambda p: ["--robot", "two_link", *PAPER, "--via", "0", "0", "--via", "0", "0"],
+        ConfigurationError,
+        "via-point 0 and via-point 1 are the same configuration",
+    ),
+    "a via-point at the goal": Case(
+        lambda p: plan(*GOOD, via=[THETA_E]),
+        lambda p: ["--robot", "two_link", *PAPER, "--via", "-90", "0"],
+        ConfigurationError,
+        "via-point 0 and the goal are the same configuration",
+    ),
+    "a max_duration too short": Case(
+        lambda p: plan(*GOOD, nearopt.TorqueCost(0.03), max_duration=0.01),
+        lambda p: ["--robot", "two_link", *PAPER, "--beta", "0.03", "--max-duration", "0.01"],
+        InfeasiblePathError,
+        "max_duration 0.01 s is shorter than the time-optimal motion",
+    ),
+    "a NaN start velocity": Case(
+        lambda p: plan(*GOOD, qd0=[0.0, np.nan]),
+        lambda p: ["--robot", "two_link", *PAPER, "--qd0", "0", "nan"],
+        ConfigurationError,
+        "qd0 of joint 'joint2' is nan",
     ),
     "negative weight": Case(
         lambda p: nearopt.TorqueCost(weights=[0.1, -0.1]),
@@ -1160,3 +1184,14 @@ def test_cli_answers_with_one_line_and_writes_nothing(name: str, tmp_path: Path)
     assert len(lines) == 1 and lines[0].startswith("nearopt: error: "), done.stderr
     assert case.says in lines[0], lines[0]
     assert sorted(work.rglob("*")) == before  # no output file, not even a partial one
+
+
+def test_max_duration_inf_is_no_limit() -> None:
+    """``max_duration=inf`` (``--max-duration inf``) plans as without it, as ``time_limit=inf``
+    does; it was refused as not finite."""
+    cost = nearopt.TorqueCost(0.03)
+    free = nearopt.plan(two_link(), *GOOD, cost, grid=20, max_iterations=0)
+    unbounded = nearopt.plan(
+        two_link(), *GOOD, cost, grid=20, max_iterations=0, max_duration=np.inf
+    )
+    assert unbounded.J == free.J and unbounded.duration == free.duration

@@ -100,6 +100,7 @@ def local_run(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     run = batch(str(tasks), "--out", str(folder / "out"))
     assert run.returncode == 1, run.stderr  # the infeasible motion failed, the rest planned
     assert "22 motions: 21 planned, 1 failed" in run.stdout
+    assert "motions/s, 22 tasks)" in run.stdout  # a motion each (it said 0)
     return tasks, folder / "out"
 
 

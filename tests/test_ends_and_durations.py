@@ -157,8 +157,8 @@ def test_bad_end_velocities_and_durations_are_named() -> None:
     cases = [
         ({"qd0": across}, nearopt.ConfigurationError, "points elsewhere"),
         ({"qde": -0.5 * direction}, nearopt.ConfigurationError, "goes the other way"),
-        ({"qd0": [1.0]}, nearopt.ConfigurationError, "2 finite joint velocities"),
-        ({"qd0": [np.nan, 0.0]}, nearopt.ConfigurationError, "2 finite joint velocities"),
+        ({"qd0": [1.0]}, nearopt.ConfigurationError, "must be 2 joint velocities"),
+        ({"qd0": [np.nan, 0.0]}, nearopt.ConfigurationError, "qd0 of joint 'joint1' is nan"),
         ({"qd0": 1e4 * direction}, nearopt.ConfigurationError, "beyond its speed limit"),
         ({"qd0": 95.0 * direction / np.max(np.abs(direction))}, nearopt.InfeasiblePathError, "qd0"),
         ({"duration": 1e-3}, nearopt.InfeasiblePathError, "shorter than the time-optimal"),

@@ -89,11 +89,11 @@ def test_bad_boundary_velocities_are_refused_naming_the_joint() -> None:
     cases = [
         ({"qd0": fast}, names[2], "beyond its speed limit"),
         ({"qde": -fast}, names[2], "beyond its speed limit"),
-        ({"qd0": qd[:3]}, None, "6 finite joint velocities"),
-        ({"qd0": "fast"}, None, "6 finite joint velocities"),
+        ({"qd0": qd[:3]}, None, "must be 6 joint velocities"),
+        ({"qd0": "fast"}, None, "must be 6 joint velocities"),
         ({"q0": at_limit, "qd0": outward}, names[1], "on its position limits"),
         ({"qde": -outward}, names[1], "arrive from beyond them"),
-        ({"qd0": [True, False, 0, 0, 0, 0]}, None, "6 finite joint velocities"),
+        ({"qd0": [True, False, 0, 0, 0, 0]}, None, "must be 6 joint velocities"),
         ({"qd0": qd, "method": "paper"}, None, "method 'paper'"),
         ({"qd0": qd, "via": [0.5 * (q + q2)]}, None, "via-points"),
     ]

@@ -90,6 +90,7 @@ def run_files(
         tuple(outcomes[r.id] for r in requests if r.id in outcomes),
         skipped,
         time.perf_counter() - t0,
+        tasks=len(todo),  # a motion each
     )
 
 

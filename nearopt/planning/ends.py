@@ -446,9 +446,16 @@ def check_velocity(
     limit (where those are enforced), naming ``name`` and the joint (in deg/s with ``degrees``:
     a request given in them)."""
     v = real_array(value)
-    if v is None or v.shape != (robot.n,) or not np.all(np.isfinite(v)):
+    if v is None or v.shape != (robot.n,):
+        got = repr(value)[:80] if v is None else f"{v.size} value{'s' if v.size != 1 else ''}"
         raise ConfigurationError(
-            f"{name} must be {robot.n} finite joint velocities [rad/s or m/s], got {value!r:.80}"
+            f"{name} must be {robot.n} joint velocities [rad/s or m/s] (one per joint of "
+            f"{robot.name}: {', '.join(robot.joint_names)}), got {got}"
+        )
+    if not np.all(np.isfinite(v)):
+        i = int(np.argmax(~np.isfinite(v)))
+        raise ConfigurationError(
+            f"{name} of joint {robot.joint_names[i]!r} is {v[i]}", joint=robot.joint_names[i]
         )
     limit = robot.limits.velocity
     over = np.abs(v) - limit * (1.0 + 1e-12) if velocity_limits else np.zeros(robot.n)

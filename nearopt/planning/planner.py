@@ -19,6 +19,7 @@ update (stage 2) is one of :class:`~nearopt.planning.Method`:
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import replace
@@ -176,7 +177,7 @@ def plan(
         Where the first path cannot be as fast as T, stage 2 starts from the path it finds
         for the time-optimal cost; stage 2 also runs from the plan without the duration where
         that path can be as fast, and the lower J is returned. ``"scp"`` only; not with jerk
-        limits.
+        limits. ``max_duration=inf`` is no limit.
     qd0, qde
         The joint velocities θ̇(0) and θ̇(t_e) [rad/s or m/s], shape (n,); None (or zeros): at
         rest there. Every path leaves θ0 along qd0 and reaches θe along qde (its first and last
@@ -231,6 +232,8 @@ def plan(
         via,
         t_start,
     )
+    if is_number(max_duration) and float(max_duration) == math.inf:  # type: ignore[arg-type]
+        max_duration = None  # no limit (as time_limit = inf)
     if duration is not None or max_duration is not None:
         setup = replace(setup, duration=_check_duration(setup, duration, max_duration))
     if qd0 is not None or qde is not None:
@@ -546,13 +549,14 @@ def _fast_enough(
     """The first path, if it can be as fast as the plan's duration; else the path stage 2
     finds for the time-optimal cost (the first path of the plan then), if that can; else
     InfeasiblePathError with the fastest motion found."""
-    duration = setup.duration[0]
+    duration, exact = setup.duration
+    word = "duration" if exact else "max_duration"
     fastest = _fastest(setup, line)
     if fastest <= duration:
         return line, start
     if setup.max_iterations == 0:
         raise InfeasiblePathError(
-            f"duration {duration:.9g} s is shorter than the time-optimal motion along the first "
+            f"{word} {duration:.9g} s is shorter than the time-optimal motion along the first "
             f"path, {fastest:.9g} s"
         )
     quick = replace(setup, cost=TimeCost(), duration=None)
@@ -561,7 +565,7 @@ def _fast_enough(
     quickest = _fastest(setup, timing.trajectory.path)
     if quickest > duration:
         raise InfeasiblePathError(
-            f"duration {duration:.6g} s is shorter than the time-optimal motion along the first "
+            f"{word} {duration:.6g} s is shorter than the time-optimal motion along the first "
             f"path ({fastest:.6g} s) and along the fastest path stage 2 found ({quickest:.6g} s)"
         )
     return timing.trajectory.path, timing.trajectory.path

@@ -70,8 +70,13 @@ def first_path(setup: Segment) -> tuple[Path, Path | None, tuple[float, ...]]:
         return line, start, via_s
     if vias:
         points = np.vstack([q0, *vias, qe])
-        if np.any(np.all(np.diff(points, axis=0) == 0.0, axis=1)):
-            raise ConfigurationError("two consecutive points (start, via-points, goal) are equal")
+        same = np.flatnonzero(np.all(np.diff(points, axis=0) == 0.0, axis=1))
+        if same.size:
+            names = ["the start", *(f"via-point {k}" for k in range(len(vias))), "the goal"]
+            raise ConfigurationError(
+                f"{names[same[0]]} and {names[same[0] + 1]} are the same configuration: "
+                "consecutive points (start, via-points, goal) must differ"
+            )
         k = max(options.control_points, 4 * (len(vias) + 1))
         bounds = position_bounds(robot, position_limits)
         start, sigma = path_through(points, k, knot_breaks(options, k), None, *bounds)

@@ -423,11 +423,15 @@ def with_moving_ends(
             ends.append(0.0)
             continue
         given, qd = qd, real_array(qd)
-        if qd is None or qd.shape != (problem.dof,) or not np.all(np.isfinite(qd)):
+        if qd is None or qd.shape != (problem.dof,):
+            got = repr(given)[:80] if qd is None else f"{qd.size} value{'s' * (qd.size != 1)}"
             raise ConfigurationError(
-                f"{name} must be {problem.dof} finite joint velocities, got {given!r:.80}"
+                f"{name} must be {problem.dof} joint velocities (one per joint), got {got}"
             )
         names = problem.joint_names
+        if not np.all(np.isfinite(qd)):
+            i = int(np.argmax(~np.isfinite(qd)))
+            raise ConfigurationError(f"{name} of joint {names[i]!r} is {qd[i]}", joint=names[i])
         over = np.abs(qd) - problem.velocity * (1.0 + 1e-12)  # (a limit × a ratio rounds)
         if np.any(over > 0.0):
             i = int(np.argmax(over))
