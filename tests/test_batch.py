@@ -539,3 +539,26 @@ def test_an_option_of_the_wrong_kind_fails_its_motion_not_the_batch(tmp_path: Pa
     error = json.loads((tmp_path / "out" / "failed" / "bad.json").read_text())["error"]
     assert "jerk_limit" in error
     assert (tmp_path / "out" / "good.json").is_file()
+
+
+def test_files_no_batch_wrote_are_refused_and_kept(tmp_path: Path) -> None:
+    """``--out`` a folder of the user's: a ``summary.csv`` or a ``<id>.json`` that no batch
+    wrote was silently replaced; now the batch refuses before planning and keeps them. A
+    second run over its own outputs resumes as before."""
+    motion = {"id": "a", "robot": "two_link", "q0": [0, 0], "qe": [0.4, 0.2], "grid": 40}
+    tasks = write_motions(tmp_path, [motion])
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "summary.csv").write_text("my,own,table\n")
+    run = batch(str(tasks), "--out", str(out))
+    assert run.returncode == 2 and "is not a batch's summary" in run.stderr, run.stderr
+    (out / "summary.csv").unlink()
+    (out / "a.json").write_text('{"mine": true}')
+    run = batch(str(tasks), "--out", str(out))
+    assert run.returncode == 2 and "is not the outcome of a motion" in run.stderr, run.stderr
+    assert (out / "a.json").read_text() == '{"mine": true}'
+    assert sorted(p.name for p in out.iterdir()) == ["a.json"]
+    (out / "a.json").unlink()
+    assert batch(str(tasks), "--out", str(out)).returncode == 0
+    again = batch(str(tasks), "--out", str(out))
+    assert again.returncode == 0 and "done before, skipped" in again.stdout, again.stdout

@@ -17,7 +17,7 @@ from typing import TYPE_CHECKING
 from ..api import FILE_FIELDS
 from ..errors import ConfigurationError
 from ..outputs import make_folder, resolve_output, write_atomically, write_outputs
-from ..ros import replace_folder
+from ..ros import check_bag_folder, replace_folder
 
 if TYPE_CHECKING:
     pass
@@ -48,6 +48,7 @@ def run_files(
     """:func:`run_batch` once the pool is known (``client``: None or a :class:`Pool`)."""
     folder = make_folder(out, "the motions")
     refuse_inputs(folder, requests)
+    refuse_foreign(folder, requests)
     outcomes: dict[str, MotionOutcome] = {}
     for request in requests:
         done = _done(folder, request, retry_failed, rate)
@@ -134,6 +135,43 @@ def _same_file(a: Path, b: Path) -> bool:
         return os.path.samefile(a, b)
     except OSError:  # one of them does not exist (yet): the same place, or not
         return os.path.realpath(a) == os.path.realpath(b)
+
+
+def refuse_foreign(folder: Path, requests: Sequence[MotionRequest]) -> None:
+    """A ConfigurationError naming the first file the batch would replace that no batch wrote:
+    ``summary.csv`` not headed by :data:`SUMMARY_FIELDS`, a motion's ``<id>.json`` (or
+    ``failed/<id>.json``) that is not a motion's outcome (a JSON object with its ``request``),
+    ``bags/<id>`` that is not a bag (:func:`~nearopt.ros.check_bag_folder`). Files an earlier
+    run wrote are replaced or resumed from; anything else in the folder is left alone."""
+    summary = folder / "summary.csv"
+    if summary.exists():
+        try:
+            first = summary.read_text(encoding="utf-8").split("\n", 1)[0]
+        except (OSError, UnicodeDecodeError):
+            first = None
+        if first != ",".join(SUMMARY_FIELDS):
+            raise ConfigurationError(
+                f"{summary} is not a batch's summary: the batch would replace it; give --out a "
+                "folder of its own"
+            )
+    for request in requests:
+        for planned in (True, False):
+            path = _file(folder, request.id, planned)
+            if path.exists() and not _an_outcome(path):
+                raise ConfigurationError(
+                    f"{path} is not the outcome of a motion: the batch would replace it (motion "
+                    f"{request.id!r}); give --out a folder of its own"
+                )
+        check_bag_folder(folder / "bags" / request.id)
+
+
+def _an_outcome(path: Path) -> bool:
+    """Whether ``path`` holds a motion's outcome as a batch writes it."""
+    try:
+        document = json.loads(path.read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(document, dict) and "request" in document
 
 
 def _file(folder: Path, motion_id: str, planned: bool) -> Path:
