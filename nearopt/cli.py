@@ -91,9 +91,12 @@ class _Once(argparse._StoreAction):  # noqa: SLF001 - argparse's own store actio
 
 class _Parser(argparse.ArgumentParser):
     """An argument parser whose errors are ConfigurationErrors (one line, exit code 2, no usage
-    dump; a batch records them as the motion's error); an option given twice is an error."""
+    dump; a batch records them as the motion's error); an option given twice is an error; no
+    abbreviations (``--bet`` is not ``--beta``: a batch's motions name options in full, and an
+    abbreviation would change meaning as options are added)."""
 
     def __init__(self, *args: object, **kwargs: object) -> None:
+        kwargs.setdefault("allow_abbrev", False)
         super().__init__(*args, **kwargs)  # type: ignore[arg-type]
         self.register("action", None, _Once)
         self.register("action", "store", _Once)

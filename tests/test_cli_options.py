@@ -61,3 +61,13 @@ def test_a_wrong_option_value_is_one_line(option: str, bad: str, tmp_path: Path)
         assert done.returncode == 2, done.stderr
         assert len(lines) == 1 and lines[0].startswith("nearopt: error: "), done.stderr
     assert list(tmp_path.iterdir()) == []
+
+
+def test_an_abbreviated_option_is_refused_as_a_batch_refuses_it(tmp_path: Path) -> None:
+    """``--bet 0.03`` was read as ``--beta 0.03`` on the command line while a batch's motion
+    with ``"bet"`` was refused: one request model, one spelling of each option."""
+    args = [word for key, values in BASE.items() for word in (key, *values)] + FLAGS
+    done = run_cli("plan", *args, "--bet", "0.03", cwd=tmp_path)
+    assert done.returncode == 2
+    assert done.stderr.strip() == "nearopt: error: unrecognized arguments: --bet 0.03"
+    assert run_cli("plan", *args, "--beta", "0.03", cwd=tmp_path).returncode == 0
