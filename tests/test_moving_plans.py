@@ -303,3 +303,21 @@ def test_nearly_resting_ends_under_a_duration() -> None:
     assert moving.duration <= limit * (1 + 1e-9)
     assert moving.J <= 1.06 * rest.J, (moving.J, rest.J)
     assert nearopt.verify_plan(moving).passed
+
+
+def test_a_plans_own_state_at_its_torque_limit_replanned_under_a_duration() -> None:
+    """two_link at half of a plan's duration (its own state: a joint at a torque limit),
+    re-planned to the same goal in 0.6 of that plan's t_e: stage 1 left an excess between the
+    samples next to the moving start that a slow-down by 1.07e-7 of b would take back (four
+    tightenings left it there) and refused it ("try another grid"); an excess that small is
+    within verify's tolerance and the plan is returned, verified."""
+    robot = load("two_link")
+    q = np.array([-3.0179655598371333, -2.8680379536219682])
+    qd = np.array([32.83913249806539, 9.487330035982195])
+    qe = np.array([-1.6574562478962949, -2.1506201678348127])
+    result = nearopt.plan(
+        robot, q, qe, nearopt.TorqueCost(1e-3), qd0=qd, duration=0.10837979148833489
+    )
+    assert abs(result.duration - 0.10837979148833489) < 1e-9
+    assert nearopt.verify_plan(result).passed
+
