@@ -321,3 +321,22 @@ def test_a_plans_own_state_at_its_torque_limit_replanned_under_a_duration() -> N
     assert abs(result.duration - 0.10837979148833489) < 1e-9
     assert nearopt.verify_plan(result).passed
 
+
+def test_a_braking_estimate_the_states_velocity_terms_dominate_is_not_claimed_as_a_bound() -> None:
+    """two_link at half of a plan's duration, joint 2 at 34 rad/s: the torque limits leave
+    joint 1 0.28 rad/s² of braking at that state, and the refusal said it "cannot stop" within
+    12 rad — while the plan it came from stopped it in 0.08 s (its Coriolis terms vanish as it
+    slows). Where the state's velocity terms are a large share of the torque limits, the
+    refusal says the braking is an estimate at that state."""
+    robot = load("two_link")
+    q = np.array([5.6709161332876485, -2.774413811222577])
+    qd = np.array([-3.9608936453365624, -34.00828854343209])
+    qe = np.array([5.654866776461628, -4.085784293395908])
+    try:
+        result = nearopt.plan(robot, q, qe, COST, qd0=qd)
+    except nearopt.InfeasiblePathError as exc:
+        text = str(exc)
+        assert "cannot stop" not in text and "an estimate only" in text, text
+        assert "joint1" in text and "of the torque limits" in text, text
+    else:  # a first path that can be timed from there is better still
+        assert nearopt.verify_plan(result).passed
