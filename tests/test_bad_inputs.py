@@ -458,6 +458,18 @@ CASES = {
         URDFError,
         "j1",
     ),
+    "a joint whose position limits leave it no room": Case(
+        from_edited('lower="-3" upper="3"', 'lower="0.5" upper="0.5"'),
+        cli_edited('lower="-3" upper="3"', 'lower="0.5" upper="0.5"'),
+        URDFError,
+        "joint 'j1' has position limits lower = upper = 0.5: it cannot move",
+    ),
+    "negative joint damping": Case(
+        from_edited("</joint>", '<dynamics damping="-1.0"/></joint>'),
+        cli_edited("</joint>", '<dynamics damping="-1.0"/></joint>'),
+        URDFError,
+        "joint 'j1' has a negative damping -1.0",
+    ),
     "negative effort limit": Case(
         from_edited('effort="5"', 'effort="-5"'),
         cli_edited('effort="5"', 'effort="-5"'),

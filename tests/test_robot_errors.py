@@ -61,6 +61,22 @@ def test_mimic_joint_is_rejected_unless_locked(tmp_path: Path) -> None:
     assert nearopt.Robot.from_urdf(path, locked_joints=["j2"]).joint_names == ["j1"]
 
 
+def test_one_locked_joint_by_its_name_alone(tmp_path: Path) -> None:
+    """``locked_joints="j2"`` locks j2 (it was split into its letters and refused)."""
+    path = write_urdf(tmp_path, extra=("", '<mimic joint="j1"/>'))
+    assert nearopt.Robot.from_urdf(path, locked_joints="j2").joint_names == ["j1"]
+
+
+def test_a_locked_joint_may_have_no_room(tmp_path: Path) -> None:
+    """lower = upper ≠ 0 is refused for a joint that would move; a locked one stays there."""
+    path = write_urdf(
+        tmp_path, limits=(LIMIT, LIMIT.replace('lower="-3" upper="3"', 'lower="0.5" upper="0.5"'))
+    )
+    with pytest.raises(URDFError, match="joint 'j2' has position limits lower = upper = 0.5"):
+        nearopt.Robot.from_urdf(path)
+    assert nearopt.Robot.from_urdf(path, locked_joints=["j2"], lock_at={"j2": 0.5}).n == 1
+
+
 def test_unknown_locked_joint(tmp_path: Path) -> None:
     with pytest.raises(URDFError, match=re.escape("cannot lock joint(s) ['j9']")):
         nearopt.Robot.from_urdf(write_urdf(tmp_path), locked_joints=["j9"])

@@ -296,7 +296,7 @@ class Robot:
         cls,
         path: str | Path,
         *,
-        locked_joints: tuple[str, ...] | list[str] = (),
+        locked_joints: str | tuple[str, ...] | list[str] = (),
         tip: str | None = None,
         base: str | None = None,
         srdf: str | Path | None = None,
@@ -317,7 +317,8 @@ class Robot:
             The URDF file.
         locked_joints
             Joints to hold fixed at their reference value (0 clipped to their limits, or
-            ``lock_at``), e.g. the fingers of a gripper; duplicates and fixed joints are ignored.
+            ``lock_at``), e.g. the fingers of a gripper (a name or a list of names); duplicates
+            and fixed joints are ignored.
         tip
             A link: the arm is the chain of joints from ``base`` to it (every other moving joint
             is locked, like ``locked_joints``), and it is the end effector the figures and the
@@ -355,6 +356,8 @@ class Robot:
         srdf = None if srdf is None else Path(srdf).expanduser().resolve()
         if srdf is not None and not srdf.is_file():
             raise URDFError(f"the SRDF {srdf} does not exist", path=str(srdf))
+        if isinstance(locked_joints, str):  # one joint's name, not its letters
+            locked_joints = (locked_joints,)
         arm = read_urdf(path, tuple(locked_joints), tip, base, srdf if group else None, group)
         robot_name, xml, continuous, no_effort, locked = (
             arm.name,

@@ -4,13 +4,13 @@
 Pinocchio would accept silently or reject with the wrong cause: numbers that are not finite,
 negative masses and inertias that are not physical (not positive semi-definite, or principal
 moments that break the triangle inequality I1 + I2 ≥ I3) on links that the arm's joints move,
-position limits with lower > upper, negative
-effort or velocity limits, zero joint axes, duplicate names, joints between unknown links, links
-with two parents and kinematic loops. It turns continuous joints into revolute ones without
-position limits (θ an angle in ℝ, nq = nv) and decides which joints are locked: those asked for
-(duplicates and fixed joints ignored), every moving joint off the chain from ``base`` to ``tip``,
-or every moving joint outside an SRDF group. :class:`~nearopt.Robot` builds the Pinocchio model
-from the text it returns.
+position limits with lower > upper or lower = upper ≠ 0 (a joint that cannot move), negative
+effort or velocity limits and negative damping, zero joint axes, duplicate names, joints between
+unknown links, links with two parents and kinematic loops. It turns continuous joints into
+revolute ones without position limits (θ an angle in ℝ, nq = nv) and decides which joints are
+locked: those asked for (duplicates and fixed joints ignored), every moving joint off the chain
+from ``base`` to ``tip``, or every moving joint outside an SRDF group. :class:`~nearopt.Robot`
+builds the Pinocchio model from the text it returns.
 """
 
 from __future__ import annotations
@@ -482,6 +482,21 @@ def _check_joint(
             path,
             f"joint {name!r} has position limits lower {limit.get('lower')} > "
             f"upper {limit.get('upper')}",
+        )
+    elif float(limit.get("lower", "0")) == float(limit.get("upper", "0")) != 0.0 and (
+        name not in locked
+    ):  # (lower = upper = 0: undeclared, no limit)
+        raise _error(
+            path,
+            f"joint {name!r} has position limits lower = upper = {limit.get('lower')}: it cannot "
+            "move; lock it there (locked_joints=..., --lock, --lock-at) or give it a range",
+        )
+    dynamics = joint.find("dynamics")
+    if dynamics is not None and float(dynamics.get("damping", "0")) < 0.0:
+        raise _error(
+            path,
+            f"joint {name!r} has a negative damping {dynamics.get('damping')} N·m·s/rad: a "
+            "damper takes energy out, never in",
         )
     if float(limit.get("effort", "0")) == 0.0 and name not in locked:
         no_effort.append(name)
