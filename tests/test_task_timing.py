@@ -152,3 +152,20 @@ def test_a_velocity_through_a_position_limit_is_refused_up_front() -> None:
     with pytest.raises(TaskError, match="on its position limits") as caught:
         nearopt.plan_task(robot, START, [Target(on, stop=False, velocity=v), Target(GOAL)])
     assert "'target 1'" in str(caught.value) and robot.joint_names[1] in str(caught.value)
+
+
+def test_a_target_passed_at_a_velocity_in_a_cell_is_refused_before_any_segment() -> None:
+    """Moving segment ends are not planned with obstacles yet: said before anything is planned,
+    naming the target (the first segment was planned in full, then the second refused)."""
+    from nearopt.collision import Box, Obstacle, Scene
+
+    far = Scene((Obstacle("box", Box((0.1, 0.1, 0.1)), (5.0, 5.0, 5.0)),))
+    targets = [Target(STOP), Target(PASS, stop=False, velocity=VELOCITY, name="handover"),
+               Target(GOAL)]  # fmt: skip
+    heard = []
+    with pytest.raises(nearopt.ConfigurationError, match="target 'handover' is passed at a veloc"):
+        nearopt.plan_task(
+            load("ur5"), START, targets, COST, nearopt.PlanSettings(scene=far),
+            callback=lambda k, entry: heard.append(k),
+        )  # fmt: skip
+    assert heard == []

@@ -518,6 +518,13 @@ def plan_task(
         else str(targets.source),
     )
     collisions = collisions_for(robot, settings.scene, settings.margin, settings.self_collision)
+    moving = next((t for t in records if t.velocity is not None), None)
+    if collisions is not None and moving is not None:  # said before any segment is planned
+        raise ConfigurationError(
+            f"target {moving.name!r} is passed at a velocity: a segment that starts or ends "
+            "moving is not planned with obstacles or self-collision checks yet; stop there, or "
+            "pass it without a velocity (a via-point)"
+        )
     segments, interrupted = _plan_segments(
         robot,
         _stop_groups(records),
