@@ -283,6 +283,32 @@ def test_a_tool_pose_via_point_is_solved_for_a_short_way_through_it() -> None:
     assert way(qv) <= 1.05 * way(qm)
 
 
+def test_a_tool_pose_via_points_configuration_moves_along_its_pose() -> None:
+    """A panda pose taken from a free plan's own path at half its duration (a fuzz pass's
+    case): the via-point was the inverse-kinematics solution with the shortest way and stayed
+    there, J 2.302 against the plan's 2.153 (+6.9 %); its configuration now moves along the
+    pose as a goal pose's does, each step put back onto the pose, and the plan costs what the
+    plan whose pose it was does. verify_plan checks the pose."""
+    robot = load("panda")
+    q0 = np.array([-2.1608976024625988, -0.8351107901503118, 1.5711885144764892,
+                   -1.3488146109612908, -2.1166759527064043, 1.6405997082223558,
+                   -0.109250413013811])  # fmt: skip
+    qe = np.array([-2.60757, -0.1734906261436503, -0.21970437621425942, -1.610040988666909,
+                   -2.039073822932201, 1.431373817791516, 0.2931199886305493])  # fmt: skip
+    cost = nearopt.TorqueCost(1e-3)
+    free = nearopt.plan(robot, q0, qe, cost)
+    pose = pose_of(robot, free.trajectory(np.array([0.5 * free.duration]))[0])
+    through = nearopt.plan(robot, q0, qe, cost, via=[pose])
+    assert through.J <= free.J * (1 + 1e-3), (through.J, free.J)
+    at = through.trajectory(np.array(through.via_times), 0)[0]
+    assert max(pose_error(robot, at, pose)) < 1e-9
+    np.testing.assert_allclose(through.via[0], at, rtol=0, atol=1e-12)
+    report = nearopt.verify_plan(through, q0=q0, qe=qe)
+    assert report.passed and "via-point poses" in str(report), str(report)
+    fixed = nearopt.plan(robot, q0, qe, cost, via=[pose], optimise_goal=False)
+    assert fixed.J > 1.05 * free.J  # (the solution with the shortest way, kept: the old plan)
+
+
 def test_a_step_is_put_back_onto_the_via_points_exactly() -> None:
     """Stage 2's model keeps the via-points to its own accuracy only (a kinova cell plan's
     iterates drifted 1.6e-8 rad off one, and verify asks 1e-8): each trial step is moved back
@@ -304,7 +330,7 @@ def test_a_step_is_put_back_onto_the_via_points_exactly() -> None:
     assert np.abs(path_of(p)(sigma) - points[1:3]).max() > 1e-8
     lower, upper = np.full(k * n, -np.inf), np.full(k * n, np.inf)
     lower[4] = p[4]  # control point 1 of joint 1 at its lower limit
-    moved = through_vias(start, tuple(sigma), path_of, lower, upper, p)
+    moved = through_vias(start, (tuple(sigma), ()), path_of, (lower, upper), p)
     np.testing.assert_allclose(path_of(moved)(sigma), points[1:3], rtol=0, atol=1e-14)
     assert moved[4] == p[4]
     # the least change: per joint, the minimum-norm solution over the other control points

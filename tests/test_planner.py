@@ -311,7 +311,7 @@ def test_the_models_floor_is_its_value_at_no_step(arm: str, weight: float) -> No
     scale = np.full(p.size, 0.05)
     model = iterate_model(
         robot, disc, z, path_basis(path, disc), p, IterateParts(timing, path), scale,
-        None, path, (), None, None, (ends, weights),
+        None, path, ((), ()), None, None, (ends, weights),
     )  # fmt: skip
     limits = (np.full(p.size, -np.inf), np.full(p.size, np.inf))
     at_zero = solve_model(disc, weights, model, z, p, 0.0 * scale, *limits)

@@ -273,8 +273,10 @@ def test_the_pick_and_place_example_runs_and_its_files_hold_the_task(tmp_path: P
     qd, qdd = np.abs(np.array(doc["qd"])), np.abs(np.array(doc["qdd"]))
     for target in doc["targets"][:3]:  # the sample beside each target: moving unless it stops
         k = int(np.argmin(np.abs(t - target["t"])))
-        if target["stop"]:  # at rest at t_stop: |θ̇(t_k)| ≤ max |θ̈| · |t_k − t_stop|
-            reach = qdd[max(k - 2, 0) : k + 3].max(axis=0) * abs(t[k] - target["t"])
+        if target["stop"]:  # at rest at t_stop: |θ̇(t_k)| ≤ max |θ̈| · |t_k − t_stop|, the
+            # max over 10 ms around it: stage 1's knots cluster at a stop, and θ̈ (piecewise
+            # constant on them) may peak on a segment shorter than the 1 ms between samples
+            reach = qdd[max(k - 10, 0) : k + 11].max(axis=0) * abs(t[k] - target["t"])
             assert np.all(qd[k] <= reach * 1.01 + 1e-9), target["name"]
         else:
             assert qd[k].max() > 0.5, target["name"]

@@ -162,8 +162,9 @@ def plan(
     optimise_goal
         With a :class:`~nearopt.ToolPose` goal and ``"scp"``: θe moves with the path among the
         configurations that hold the pose (its step in the null space of the frame's Jacobian,
-        projected back by inverse kinematics), so a redundant arm ends where J is lowest;
-        False keeps inverse kinematics' θe.
+        projected back by inverse kinematics), so a redundant arm ends where J is lowest; so
+        does the configuration of every tool-pose via-point. False keeps inverse kinematics'
+        θe and via-point configurations.
     via
         Via-points passed through without stopping, in order: joint vectors or
         :class:`~nearopt.ToolPose` (inverse kinematics from the previous point). The path goes
@@ -738,6 +739,7 @@ def _setup(
         optimise_goal,
         t_start,
         t_start + time_limit,
+        via_poses=tuple(v if isinstance(v, ToolPose) else None for v in via or ()),
     )
 
 
@@ -810,6 +812,8 @@ def _improve(
         options=options,
         run=run,
     )
+    if method == Method.SCP and optimise_goal:  # a tool-pose via-point moves along its pose
+        common["via_poses"] = setup.via_poses
     if max_iterations == 0 or method == Method.PAPER:
         run.report(0, initial, None, line)
     if max_iterations == 0:
@@ -874,6 +878,10 @@ def _result(
     robot, collisions, goal, vias = setup.robot, setup.collisions, setup.goal, setup.vias
     method, t_start = setup.method, setup.t_start
     reason, message = ended
+    if any(pose is not None for pose in setup.via_poses):  # moved along their poses: the path's
+        at = (timing if jerk is None else jerk).trajectory.path(np.asarray(via_s, dtype=float))
+        vias = [at[k] if pose is not None else v for k, (v, pose) in
+                enumerate(zip(vias, setup.via_poses, strict=True))]  # fmt: skip
     return PlanResult(
         robot=robot,
         timing=timing,
@@ -893,6 +901,7 @@ def _result(
         duration_asked=setup.duration,
         qd0=setup.ends[0],
         qde=setup.ends[1],
+        via_poses=setup.via_poses,
     )
 
 

@@ -178,6 +178,7 @@ class Segment:
     deadline: float
     duration: tuple[float, bool] | None = None  # (T, exact): t_e = T, or t_e ≤ T
     ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None] = (None, None)
+    via_poses: tuple[ToolPose | None, ...] = ()  # per via-point: the tool pose it was given as
 
 
 @dataclass(frozen=True)
@@ -289,7 +290,8 @@ class PlanResult:
     goal
         The tool pose the goal configuration was found for, when the goal was one.
     via
-        The via-points passed through [rad or m], each (n,).
+        The via-points passed through [rad or m], each (n,): a tool-pose via-point's the
+        configuration the returned path has there (it moves along the pose in stage 2).
     via_s
         The path parameters where the path passes them.
     jerk_timing
@@ -301,6 +303,8 @@ class PlanResult:
         The duration asked for [s] and whether exactly (t_e = T) or at most (t_e ≤ T); None.
     qd0, qde
         The joint velocities asked for at the start and the end [rad/s or m/s]; None: at rest.
+    via_poses
+        Per via-point, the tool pose it was given as (None: a joint vector); verified as a pose.
     """
 
     robot: Robot
@@ -321,6 +325,7 @@ class PlanResult:
     duration_asked: tuple[float, bool] | None = None
     qd0: NDArray[np.float64] | None = None
     qde: NDArray[np.float64] | None = None
+    via_poses: tuple[ToolPose | None, ...] = ()
 
     @property
     def final(self) -> TimingResult | JerkTimingResult:
@@ -337,7 +342,11 @@ class PlanResult:
         """The via-points as :func:`~nearopt.verify` checks them (passed, not stopped at)."""
         from ..verify import Waypoint
 
-        return tuple(Waypoint(float(t), q) for t, q in zip(self.via_times, self.via, strict=True))
+        poses = self.via_poses or (None,) * len(self.via)
+        return tuple(
+            Waypoint(float(t), q, pose=pose)
+            for t, q, pose in zip(self.via_times, self.via, poses, strict=True)
+        )
 
     @property
     def initial_trajectory(self) -> Trajectory:

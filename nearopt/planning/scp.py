@@ -123,6 +123,7 @@ def sequential_convex(
     via: tuple[float, ...] = (),
     duration: tuple[float, bool] | None = None,
     ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None] = (None, None),
+    via_poses: tuple[ToolPose | None, ...] = (),
 ) -> MethodOutcome:
     """Improve the path from the straight line by sequential convex programming.
 
@@ -202,7 +203,7 @@ def sequential_convex(
         bound = np.repeat(radius, n) * scale
         parts = parts if parts.timing is timing else IterateParts(timing, path_of(p))
         model = iterate_model(
-            robot, disc, z, basis, p, parts, bound, collisions, start, via, goal,
+            robot, disc, z, basis, p, parts, bound, collisions, start, (via, via_poses), goal,
             duration, (kept, weights),
         )  # fmt: skip
         j0 = timing.objective
@@ -218,17 +219,16 @@ def sequential_convex(
         if j0 - predicted <= options.tolerance * abs(j0):
             reason, message = StopReason.CONVERGED, _MODEL_GAINS_NOTHING.format(options.tolerance)
             break
-        guess = disc.b(z_model)  # stage 1 of the trial starts from the model's timing
-        p_trial, trial, timed, samples = _try_step(
-            robot, through_vias(start, via, path_of, lower, upper, p + dp), goal, collisions,
-            path_of, lambda q, like=timing, guess=guess: time_it(q, like, guess), kept,
+        p_trial, trial, timed, samples = _try_step(  # stage 1 of the trial from the model's b
+            robot, through_vias(start, (via, via_poses), path_of, (lower, upper), p + dp, robot),
+            goal, collisions, path_of,
+            lambda q, like=timing, z=z_model, d=disc: time_it(q, like, d.b(z)), kept,
         )  # fmt: skip
         evaluations += timed
         gain = -np.inf if trial is None else j0 - trial.objective
         plain = duration is None and not robot.limits.smooth  # stage 1 by its own kernel alone
         promised = parts.floor_of(weights, plain) - predicted  # what the model sees it gain
-        # the step's length per control point, as a fraction of scale
-        reach = np.max((np.abs(dp) / scale).reshape(moving, n), axis=1)
+        reach = np.max((np.abs(dp) / scale).reshape(moving, n), axis=1)  # per control point
         radius = new_radius(radius, gain, gain / max(promised, 1e-300), reach)
         if gain > 0.0:
             p, timing, index = p_trial, trial, index + 1
@@ -252,20 +252,32 @@ def sequential_convex(
 
 def through_vias(
     start: BSplinePath,
-    via: tuple[float, ...],
+    vias: tuple[tuple[float, ...], tuple[ToolPose | None, ...]],
     path_of: Callable[[NDArray[np.float64]], BSplinePath],
-    lower: NDArray[np.float64],
-    upper: NDArray[np.float64],
+    bounds: tuple[NDArray[np.float64], NDArray[np.float64]],
     p: NDArray[np.float64],
-) -> NDArray[np.float64]:
+    robot: Robot | None = None,
+) -> NDArray[np.float64] | None:
     """The iterate p moved by the least change (:func:`onto_points`) that puts θ(σ_v) back on
-    the via-points (``start``'s θ at ``via``): the model keeps them to its own accuracy only, and
-    over many iterations that drifted by 1.6e-8 rad (kinova, verify asks 1e-8)."""
+    the via-points (``vias``: their σ_v and, per via-point, the tool pose it keeps or None):
+    ``start``'s θ at σ_v, or for a pose the configuration inverse kinematics finds from p's θ(σ_v)
+    (None where it finds none: a step to reject). The model keeps them to its own accuracy only,
+    and over many iterations that drifted by 1.6e-8 rad (kinova, verify asks 1e-8)."""
+    via, poses = vias
     if not via:
         return p
+    lower, upper = bounds
     sigma = np.asarray(via)
     n = start.dof
-    miss = start(sigma) - path_of(p)(sigma)  # (V, n)
+    here = path_of(p)(sigma)  # (V, n)
+    target = start(sigma)
+    for k, pose in enumerate(poses):
+        if pose is not None:
+            found = _onto(robot, pose, here[k])  # type: ignore[arg-type]
+            if found is None:
+                return None
+            target[k] = found
+    miss = target - here
     moving = p.size // n
     inner = start.basis(sigma)[:, 1 : 1 + moving]
     control = p.reshape(moving, n)
@@ -479,14 +491,15 @@ def iterate_model(
     reach: NDArray[np.float64],
     collisions: CollisionModel | None,
     start: BSplinePath,
-    via: tuple[float, ...],
+    vias: tuple[tuple[float, ...], tuple[ToolPose | None, ...]],
     goal: ToolPose | None,
     duration: tuple[float, bool] | None = None,
     ends: tuple[MovingEnds, NDArray[np.float64]] | None = None,
 ) -> _Model:
     """The convex model at the iterate p (timing z; its path and what else depends on the
     iterate alone in ``parts``): stage 1's rows linearised in
-    the path, the clearances, the via-points kept (B(σ_v) Δp = 0 per joint), θe kept on the
+    the path, the clearances, the via-points kept (``vias``: their σ_v and the pose each keeps
+    or None; B(σ_v) Δp = 0 per joint, or J_pose B(σ_v) Δp = 0 for a pose), θe kept on the
     pose (J_task Δθe = 0) and the ends' directions kept with their b_0, b_N following the path
     (``ends``: the moving ends and the torque weights, :mod:`nearopt.planning.ends`)."""
     n = robot.n
@@ -515,9 +528,16 @@ def iterate_model(
                 samples=parts.samples,
             ),
         )
-    if via:  # every iterate goes through the via-points: B(σ_v) Δp = 0 per joint
+    via, poses = vias
+    if via:  # every iterate goes through the via-points: B(σ_v) Δp = 0 per joint (J B Δp: a pose)
         at = start.basis(np.asarray(via))[:, 1 : None if goal is not None else -1]
-        rows = sp.csr_matrix(np.kron(at, np.eye(n)))
+        blocks = [np.kron(at[k : k + 1], np.eye(n)) for k in range(len(via))]
+        for k, pose in enumerate(poses):
+            if pose is not None:
+                blocks[k] = (
+                    task_jacobian(robot, pose, parts.path(np.array([via[k]]))[0]) @ blocks[k]
+                )
+        rows = sp.csr_matrix(np.vstack(blocks))
         model = _with_rows(model, rows, np.zeros(rows.shape[0]), np.zeros(rows.shape[0]))
     if goal is not None:  # θe moves along the pose: J_task Δθe = 0
         task = task_jacobian(robot, goal, p[-n:])
@@ -543,7 +563,7 @@ def _end_duration_gradient(disc: Discretisation, z: NDArray[np.float64]) -> tupl
 
 def _try_step(
     robot: Robot,
-    p_trial: NDArray[np.float64],
+    p_trial: NDArray[np.float64] | None,
     goal: ToolPose | None,
     collisions: CollisionModel | None,
     path_of: Callable[[NDArray[np.float64]], BSplinePath],
@@ -551,12 +571,13 @@ def _try_step(
     ends: MovingEnds,
 ) -> tuple[NDArray[np.float64] | None, TimingResult | None, int, CollisionSamples | None]:
     """The step's iterate (θe back onto the pose, the ends' control points back onto their
-    rays), its timing if it is certified clear and stage 1 times it (None otherwise), the
-    stage-1 solves spent (0 or 1) and its path's clearances (:class:`CollisionSamples`, on
-    which the certificate starts; None without obstacles)."""
+    rays; None: a via-point's pose was not found again), its timing if it is certified clear
+    and stage 1 times it (None otherwise), the stage-1 solves spent (0 or 1) and its path's
+    clearances (:class:`CollisionSamples`, on which the certificate starts; None without
+    obstacles)."""
     n = robot.n
-    if goal is not None:  # back onto the pose (to first order the step never left it)
-        end = _onto(robot, goal, p_trial[-n:])
+    if p_trial is not None and goal is not None:  # back onto the pose (to first order the
+        end = _onto(robot, goal, p_trial[-n:])  # step never left it)
         p_trial = None if end is None else np.concatenate([p_trial[:-n], end])
     if p_trial is not None and ends.moving:  # (to first order the step kept them there)
         p_trial = ends.onto_rays(p_trial)

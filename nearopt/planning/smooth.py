@@ -271,7 +271,7 @@ def _model_step(
     def solved(r: NDArray[np.float64]) -> tuple | None:
         bound = np.repeat(r, robot.n) * scale
         model = iterate_model(
-            robot, disc, z, basis, now.p, now.parts, bound, collisions, start, via, None
+            robot, disc, z, basis, now.p, now.parts, bound, collisions, start, (via, ()), None
         )
         model = replace(
             model,
