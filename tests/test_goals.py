@@ -306,7 +306,25 @@ def test_a_tool_pose_via_points_configuration_moves_along_its_pose() -> None:
     report = nearopt.verify_plan(through, q0=q0, qe=qe)
     assert report.passed and "via-point poses" in str(report), str(report)
     fixed = nearopt.plan(robot, q0, qe, cost, via=[pose], optimise_goal=False)
-    assert fixed.J > 1.05 * free.J  # (the solution with the shortest way, kept: the old plan)
+    assert fixed.J > 1.05 * free.J  # (the solution with the shortest way, kept: +6.9 %)
+
+
+def test_a_six_joint_arms_pose_via_point_is_solved_on_the_paths_branch() -> None:
+    """ur5 (no redundancy to move along): the pose of a free plan's configuration at 0.3 of its
+    duration. Inverse kinematics from the start, the goal and their midpoint came out on another
+    branch (elbow flipped; J +47 % over the plan whose pose it was); from points along the line
+    between them too, it finds the path's own."""
+    robot = load("ur5")
+    q0 = np.array([1.149833933474273, 1.1609094273321694, 0.057776003978562196,
+                   -0.8075097728690002, -1.6816416340676965, -0.43968896076500563])  # fmt: skip
+    qe = np.array([-0.3450478865509852, -1.7142721322893457, -1.701143353162283,
+                   1.881849619123106, 0.5744180179185907, -1.00087296004454])  # fmt: skip
+    cost = nearopt.TorqueCost(1e-3)
+    free = nearopt.plan(robot, q0, qe, cost)
+    qm = free.trajectory(np.array([0.3 * free.duration]))[0]
+    through = nearopt.plan(robot, q0, qe, cost, via=[pose_of(robot, qm)], optimise_goal=False)
+    assert np.max(np.abs(through.via[0] - qm)) < 1e-6, (through.via[0], qm)
+    assert through.J <= free.J * (1 + 1e-3), (through.J, free.J)
 
 
 def test_a_step_is_put_back_onto_the_via_points_exactly() -> None:

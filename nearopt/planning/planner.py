@@ -1032,8 +1032,9 @@ def _via_points(
 ) -> list[NDArray[np.float64]]:
     """The via-points as joint vectors, checked; a tool pose by inverse kinematics: of the
     solutions from the previous point, the next joint vector (a later via-point or qe) and
-    their midpoint, the one with the shortest way from the previous point to the next (from the
-    previous point alone, a panda pose on a plan's own path came out on a far branch: J 2×)."""
+    points on the line between them (:data:`VIA_SEEDS`), the one with the shortest way from the
+    previous point to the next (from the previous point alone, a panda pose on a plan's own path
+    came out on a far branch: J 2×)."""
     if via is None:
         return []
     flat = isinstance(via, np.ndarray) and via.ndim == 1
@@ -1053,9 +1054,12 @@ def _via_points(
         if isinstance(point, ToolPose):
             later = [v for v in via[k + 1 :] if not isinstance(v, ToolPose)]
             after = robot.check_configuration(later[0], "a via-point") if later else qe
+            # from the points around it, and along the line between them where the pose leaves
+            # the arm no redundancy (its branch is then final: stage 2 cannot move along it)
+            fixed = robot.n <= (6 if point.quaternion is not None else 3)
             found = [
-                inverse_kinematics(robot, point, seed=seed)
-                for seed in (previous, after, 0.5 * (previous + after))
+                inverse_kinematics(robot, point, seed=previous + g * (after - previous))
+                for g in (VIA_SEEDS if fixed else VIA_SEEDS[:3])
             ]
             q = min(
                 found,
@@ -1068,6 +1072,16 @@ def _via_points(
         out.append(q)
         previous = q
     return out
+
+
+VIA_SEEDS = (0.0, 1.0, 0.5, 0.125, 0.25, 0.375, 0.625, 0.75, 0.875)
+"""Where inverse kinematics of a tool-pose via-point starts: at these fractions of the line from
+the point before it to the point after it (the first three only where the arm has redundancy
+left at the pose, along which stage 2 moves it). From the two points and their midpoint alone, a
+6-joint arm (ur5, two poses of a free plan's own path) came out on other branches than the
+path's (J +57 % and +61 % on 2 of 5 seeds); along the line, one start reaches it. On redundant
+arms more starts changed the basin stage 2 ends in both ways (panda −0.01 → +2.6 % on one seed,
+xarm7 +1.5 → −0.04 % on another; the pick-and-place example +0.4 %)."""
 
 
 def _clear_solution(
