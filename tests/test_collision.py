@@ -631,3 +631,12 @@ def test_the_same_request_gives_the_same_plan_whatever_ran_before() -> None:
     first = run()
     plan(robot, qe, q0, TorqueCost(0.001), scene=CELL, max_iterations=1, grid=60)  # another
     assert np.array_equal(first, run())
+
+
+def test_a_goal_pose_inside_an_obstacle_says_the_configuration_was_solved_for_it() -> None:
+    """A tool position inside the post: the refusal named 'the goal configuration qe' as if the
+    user had given it; it now says it was solved for the goal pose and none found is clear."""
+    robot = load("panda")
+    q0 = np.array([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
+    with pytest.raises(CollisionError, match="solved for the goal pose .* collides: .*post"):
+        plan(robot, q0, nearopt.ToolPose((0.45, 0.0, 0.5)), TorqueCost(1e-3), scene=CELL)

@@ -720,7 +720,10 @@ def _setup(
         collisions.check_configuration(q0, "start configuration q0")
         if goal is not None:  # another solution of the pose if the first one collides
             qe = _clear_solution(robot, goal, q0, qe, collisions)
-        collisions.check_configuration(qe, "goal configuration qe")
+        what = "goal configuration qe"
+        if goal is not None:
+            what += " solved for the goal pose (no solution found keeps the margin)"
+        collisions.check_configuration(qe, what)
         _check_vias(robot, via, vias, q0, qe, collisions)
     return Segment(
         robot,
