@@ -720,10 +720,7 @@ def _setup(
         collisions.check_configuration(q0, "start configuration q0")
         if goal is not None:  # another solution of the pose if the first one collides
             qe = _clear_solution(robot, goal, q0, qe, collisions)
-        what = "goal configuration qe"
-        if goal is not None:
-            what += " solved for the goal pose (no solution found keeps the margin)"
-        collisions.check_configuration(qe, what)
+        collisions.check_configuration(qe, "goal configuration qe")
         _check_vias(robot, via, vias, q0, qe, collisions)
     return Segment(
         robot,
@@ -1096,10 +1093,15 @@ def _clear_solution(
     tries: int = 20,
 ) -> NDArray[np.float64]:
     """An inverse-kinematics solution of the goal pose clear of the margin: ``qe`` if it is,
-    else one from seeded random starts (``qe`` when none is: the caller reports it)."""
+    else one from seeded random starts; a :class:`~nearopt.CollisionError` when none is, saying
+    that the configuration was solved for the pose."""
     if collisions.closest(qe).distance >= collisions.margin:
         return qe
-    return next(_clear_solutions(robot, goal, collisions, [], tries), qe)
+    clear = next(_clear_solutions(robot, goal, collisions, [], tries), None)
+    if clear is None:
+        what = "goal configuration qe solved for the goal pose (no solution found keeps the margin)"
+        collisions.check_configuration(qe, what)
+    return qe if clear is None else clear
 
 
 def _clear_solutions(
