@@ -686,9 +686,7 @@ class CollisionModel:
             g.computeLocalAABB()
             centre = obj.placement.act(np.asarray(g.aabb_center))
             radius[i] = np.linalg.norm(centre) + g.aabb_radius
-        prismatic = np.array(
-            [model.joints[j].shortname().startswith("JointModelP") for j in range(1, model.njoints)]
-        )
+        prismatic = robot.prismatic
         travel = np.where(
             prismatic,
             np.maximum(np.abs(robot.limits.position_lower), np.abs(robot.limits.position_upper)),

@@ -40,7 +40,6 @@ __all__ = [
     "plot_accelerations",
     "plot_jerks",
     "plot_torque_rates",
-    "prismatic",
     "plot_workspace",
     "plot_history",
     "render_figures",
@@ -68,11 +67,6 @@ def _pyplot():  # noqa: ANN202 - the module, imported lazily
     return plt
 
 
-def prismatic(robot: Robot) -> NDArray[np.bool_]:
-    """Which joints are prismatic (their units are m, m/s, N instead of rad, rad/s, N·m), (n,)."""
-    return robot.prismatic
-
-
 def _joint_panels(
     robot: Robot,
     t: NDArray[np.float64],
@@ -89,7 +83,7 @@ def _joint_panels(
     """
     plt = _pyplot()
     n = robot.n
-    linear = prismatic(robot)
+    linear = robot.prismatic
     fig, axes = plt.subplots(n, 1, sharex=True, figsize=(7.5, 1.5 * n + 1.2), squeeze=False)
     symbol, rot_unit, lin_unit = quantity
     for i, ax in enumerate(axes[:, 0]):
