@@ -139,10 +139,10 @@ def _same_file(a: Path, b: Path) -> bool:
 
 def refuse_foreign(folder: Path, requests: Sequence[MotionRequest]) -> None:
     """A ConfigurationError naming the first file the batch would replace that no batch wrote:
-    ``summary.csv`` not headed by :data:`SUMMARY_FIELDS`, a motion's ``<id>.json`` (or
-    ``failed/<id>.json``) that is not a motion's outcome (a JSON object with its ``request``),
-    ``bags/<id>`` that is not a bag (:func:`~nearopt.ros.check_bag_folder`). Files an earlier
-    run wrote are replaced or resumed from; anything else in the folder is left alone."""
+    ``summary.csv`` not headed by :data:`SUMMARY_FIELDS`, ``bags/<id>`` that is not a bag
+    (:func:`~nearopt.ros.check_bag_folder`); a motion's own files are checked as they are read
+    (:func:`_done`). Files an earlier run wrote are replaced or resumed from; anything else in
+    the folder is left alone."""
     summary = folder / "summary.csv"
     if summary.exists():
         try:
@@ -155,23 +155,7 @@ def refuse_foreign(folder: Path, requests: Sequence[MotionRequest]) -> None:
                 "folder of its own"
             )
     for request in requests:
-        for planned in (True, False):
-            path = _file(folder, request.id, planned)
-            if path.exists() and not _an_outcome(path):
-                raise ConfigurationError(
-                    f"{path} is not the outcome of a motion: the batch would replace it (motion "
-                    f"{request.id!r}); give --out a folder of its own"
-                )
         check_bag_folder(folder / "bags" / request.id)
-
-
-def _an_outcome(path: Path) -> bool:
-    """Whether ``path`` holds a motion's outcome as a batch writes it."""
-    try:
-        document = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return False
-    return isinstance(document, dict) and "request" in document
 
 
 def _file(folder: Path, motion_id: str, planned: bool) -> Path:
@@ -182,19 +166,27 @@ def _file(folder: Path, motion_id: str, planned: bool) -> Path:
 def _done(
     folder: Path, request: MotionRequest, retry_failed: bool, rate: float
 ) -> MotionOutcome | None:
-    """The outcome an earlier run wrote for the same request, or None."""
+    """The outcome an earlier run wrote for the same request, or None; a ConfigurationError
+    where the motion's file is not a motion's outcome (a JSON object with its ``request``: a
+    file no batch wrote, which the batch would replace)."""
     wanted = json.loads(request.fingerprint(rate))
+    done = None
     for planned in (True, False):
-        if not planned and retry_failed:
+        path = _file(folder, request.id, planned)
+        if not path.exists():
             continue
         try:
-            document = json.loads(_file(folder, request.id, planned).read_text(encoding="utf-8"))
+            document = json.loads(path.read_text(encoding="utf-8"))
         except (OSError, ValueError):
-            continue
-        if not isinstance(document, dict) or document.get("request") != wanted:
-            continue
-        return MotionOutcome.from_document({**document, "id": request.id}, planned)
-    return None
+            document = None
+        if not isinstance(document, dict) or "request" not in document:
+            raise ConfigurationError(
+                f"{path} is not the outcome of a motion: the batch would replace it (motion "
+                f"{request.id!r}); give --out a folder of its own"
+            )
+        if done is None and document["request"] == wanted and (planned or not retry_failed):
+            done = MotionOutcome.from_document({**document, "id": request.id}, planned)
+    return done
 
 
 def _write_summary(
