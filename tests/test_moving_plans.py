@@ -239,6 +239,27 @@ def test_a_moving_start_the_iterate_grid_misjudges_is_iterated_on_the_plans_grid
     assert nearopt.verify_plan(result).passed
 
 
+def test_a_refined_run_the_iterate_grid_misjudges_goes_again_on_the_plans_grid() -> None:
+    """A ur5 re-planned to its own goal from 0.35 of its plan (a fuzz pass's state): the first
+    run was judged right, but the refined run's iterates (96 segments) fell to J 1.310 while
+    their path costs 1.561 on the plan's grid (a torque peak between the samples at the ends of
+    a segment), so the plan kept the first run's 1.4980, 4.8 % above the rest of the plan it
+    came from (1.4288). The refined run goes again on the plan's grid: J within 0.1 % of stage 2
+    on the plan's grid throughout."""
+    robot = load("ur5")
+    q = np.array([5.266694379911429, -1.054214877725254, 3.141592651675804,
+                  -4.55013899836392, 2.609722257266815, -2.1555683859563692])  # fmt: skip
+    qd = np.array([0.40471901869681637, -2.7520352134475883, -1.1897780548427992e-08,
+                   -0.6823314519083521, 3.199985825483901, 1.9999335144711137])  # fmt: skip
+    qe = np.array([5.654866776461628, -3.143891665462093, 2.827433388231,
+                   -4.298885742878067, 5.257672861932282, -1.6265816502394403])  # fmt: skip
+    result = nearopt.plan(robot, q, qe, COST, qd0=qd)
+    fine = nearopt.plan(robot, q, qe, COST, qd0=qd, options=nearopt.SCPOptions(grid=200))
+    assert "iterated on the plan's grid" in result.message
+    assert result.J <= fine.J * (1 + 1e-3), (result.J, fine.J)
+    assert nearopt.verify_plan(result).passed
+
+
 @pytest.mark.parametrize("end", ["start", "end"])
 def test_a_joint_too_fast_to_stop_before_its_limit_is_named(end: str) -> None:
     """ur5's elbow 1e-6 rad below its upper limit, at 0.1 rad/s toward it at the start (away

@@ -1199,12 +1199,25 @@ def _refined(
         return first
     misjudged = first.timing.J / history[-1].J - 1.0  # the plan's grid against the iterates'
     options: SCPOptions = common["options"]  # type: ignore[assignment]
-    if misjudged > GRID_TRUST and options.grid < setup.grid:
-        common = dict(common, options=replace(options, grid=setup.grid))
+    on_plan_grid = dict(common, options=replace(options, grid=setup.grid))
+    coarse = max(options.grid, 4 * count) < setup.grid  # the refined run's iterate grid
+    if misjudged > GRID_TRUST and coarse:
+        common, coarse = on_plan_grid, False
+    mark = len(history)
     second = _continued(
         setup.robot, setup.q0, setup.qe, setup.cost, goal, first, fine, common, history,
         setup.collisions, via, setup.duration, setup.ends,
     )  # fmt: skip
+    if second is first and coarse and history[-1].J < (1.0 - GRID_TRUST) * first.timing.J:
+        # its iterates' J fell that far below the first run's, and on the plan's grid it is no
+        # lower: the iterate grid misjudged J (a re-plan from 0.35 of a ur5 plan: iterates at
+        # 1.310, that path 1.561 on the plan's grid; the samples at the ends of its segments
+        # missed a torque peak between them), so the refined run goes again on the plan's grid
+        misjudged = first.timing.J / min(e.J for e in history[mark:]) - 1.0
+        second = _continued(
+            setup.robot, setup.q0, setup.qe, setup.cost, goal, first, fine, on_plan_grid,
+            history, setup.collisions, via, setup.duration, setup.ends,
+        )  # fmt: skip
     if second is first:
         return first
     note = f"{second.message} (the path refined to {count} control points"
