@@ -470,6 +470,49 @@ CASES = {
         URDFError,
         "joint 'j1' has a negative damping -1.0",
     ),
+    "a negative joint friction (Pinocchio's message named neither)": Case(
+        from_edited("</joint>", '<dynamics friction="-1"/></joint>'),
+        cli_edited("</joint>", '<dynamics friction="-1"/></joint>'),
+        URDFError,
+        "joint 'j1' has a negative friction -1 N·m",
+    ),
+    "a mass followed by a space (urdfdom dropped it, silently to nearopt)": Case(
+        from_edited('<mass value="1"/>', '<mass value=" 1 "/>'),
+        cli_edited('<mass value="1"/>', '<mass value=" 1 "/>'),
+        URDFError,
+        "<mass value> of link 'a' is ' 1 ': Pinocchio's URDF reader (urdfdom) reads no number "
+        "followed by a space, tab or line break; write '1'",
+    ),
+    "an inertia without its products (urdfdom dropped it)": Case(
+        from_edited('ixy="0" ixz="0" ', ""),
+        cli_edited('ixy="0" ixz="0" ', ""),
+        URDFError,
+        "link 'a' has an <inertia> without ixy, ixz",
+    ),
+    "an empty effort limit (a traceback)": Case(
+        from_edited('effort="5"', 'effort=""'),
+        cli_edited('effort="5"', 'effort=""'),
+        URDFError,
+        "<limit effort> of joint 'j1' is '', not a number",
+    ),
+    "two numbers for one": Case(
+        from_edited('<mass value="1"/>', '<mass value="1 2"/>'),
+        cli_edited('<mass value="1"/>', '<mass value="1 2"/>'),
+        URDFError,
+        "<mass value> of link 'a' is '1 2': one number expected, not 2",
+    ),
+    "a digit separator Python reads and urdfdom does not": Case(
+        from_edited('effort="5"', 'effort="5_0"'),
+        cli_edited('effort="5"', 'effort="5_0"'),
+        URDFError,
+        "<limit effort> of joint 'j1' is '5_0', not a number",
+    ),
+    "a lower position limit alone, above the upper's default 0": Case(
+        from_edited('lower="-3" upper="3"', 'lower="1"'),
+        cli_edited('lower="-3" upper="3"', 'lower="1"'),
+        URDFError,
+        "joint 'j1' has position limits lower 1 > upper 0 (not given)",
+    ),
     "negative effort limit": Case(
         from_edited('effort="5"', 'effort="-5"'),
         cli_edited('effort="5"', 'effort="-5"'),

@@ -16,6 +16,7 @@ builds the Pinocchio model from the text it returns.
 from __future__ import annotations
 
 import math
+import re
 import xml.etree.ElementTree as ET
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -93,11 +94,33 @@ def _error(path: Path, message: str) -> URDFError:
     return URDFError(f"{message} ({path})", path=str(path))
 
 
-def _floats(text: str | None, path: Path, where: str) -> list[float]:
-    try:
-        values = [float(x) for x in (text or "").split()]
-    except ValueError:
-        raise _error(path, f"{where} is {text!r}, not a number") from None
+_NUMBER = re.compile(r"\s*[+-]?(?:[0-9]+\.?[0-9]*|\.[0-9]+)(?:[eE][+-]?[0-9]+)?")
+"""A number as Pinocchio's URDF reader (urdfdom: a C++ stream that must end with it) reads one:
+spaces before it only, no digit separators."""
+
+_VECTORS = {"xyz", "rpy"}  # the attributes of three numbers; the others hold one
+
+
+def _floats(text: str | None, path: Path, where: str, count: int | None = None) -> list[float]:
+    """The numbers of an attribute, read as urdfdom reads them (three split at spaces, or one),
+    or a URDFError naming it: urdfdom reports what it cannot read on the console only and goes
+    on without the element (a link with ``<mass value=" 5 "/>`` had no mass)."""
+    pieces = [x for x in (text or "").split(" ") if x] if count != 1 else [text or ""]
+    for piece in pieces:
+        if _NUMBER.fullmatch(piece) is None:
+            if _NUMBER.fullmatch(piece.strip()) is not None:
+                raise _error(
+                    path,
+                    f"{where} is {text!r}: Pinocchio's URDF reader (urdfdom) reads no number "
+                    f"followed by a space, tab or line break; write {piece.strip()!r}",
+                )
+            several = (text or "").split()
+            if count == 1 and len(several) > 1 and all(_NUMBER.fullmatch(x) for x in several):
+                raise _error(path, f"{where} is {text!r}: one number expected, not {len(several)}")
+            raise _error(path, f"{where} is {text!r}, not a number")
+    values = [float(x) for x in pieces]
+    if count is not None and len(values) != count:
+        raise _error(path, f"{where} is {text!r}: {count} number(s) expected, not {len(values)}")
     bad = [x for x in values if not math.isfinite(x)]
     if bad:
         raise _error(path, f"{where} is {text!r}: not finite")
@@ -122,6 +145,7 @@ def _check_numbers(root: ET.Element, path: Path) -> None:
                         element.get(attribute),
                         path,
                         f"<{tag} {attribute}> of {_owner(element, parents)}",
+                        3 if attribute in _VECTORS else 1,
                     )
 
 
@@ -162,7 +186,14 @@ def _check_inertials(root: ET.Element, path: Path, moved: set[str]) -> None:
         inertia = inertial.find("inertia")
         if inertia is None:
             continue
-        v = {k: float(inertia.get(k, "0")) for k in _NUMBERS["inertia"]}
+        missing = [k for k in _NUMBERS["inertia"] if inertia.get(k) is None]
+        if missing:  # urdfdom then drops the link's inertia, reporting it on the console only
+            raise _error(
+                path,
+                f"link {name!r} has an <inertia> without {', '.join(missing)}: URDF asks for "
+                "all six (ixx ixy ixz iyy iyz izz; write 0 for a product of inertia that is 0)",
+            )
+        v = {k: float(inertia.get(k)) for k in _NUMBERS["inertia"]}
         matrix = np.array(
             [
                 [v["ixx"], v["ixy"], v["ixz"]],
@@ -480,8 +511,8 @@ def _check_joint(
     elif float(limit.get("lower", "0")) > float(limit.get("upper", "0")):
         raise _error(
             path,
-            f"joint {name!r} has position limits lower {limit.get('lower')} > "
-            f"upper {limit.get('upper')}",
+            f"joint {name!r} has position limits lower {limit.get('lower', '0 (not given)')} > "
+            f"upper {limit.get('upper', '0 (not given)')}",
         )
     elif float(limit.get("lower", "0")) == float(limit.get("upper", "0")) != 0.0 and (
         name not in locked
@@ -497,6 +528,12 @@ def _check_joint(
             path,
             f"joint {name!r} has a negative damping {dynamics.get('damping')} N·m·s/rad: a "
             "damper takes energy out, never in",
+        )
+    if dynamics is not None and float(dynamics.get("friction", "0")) < 0.0:
+        raise _error(
+            path,
+            f"joint {name!r} has a negative friction {dynamics.get('friction')} N·m: friction "
+            "is a magnitude (nearopt does not model it, but Pinocchio reads it)",
         )
     if float(limit.get("effort", "0")) == 0.0 and name not in locked:
         no_effort.append(name)
