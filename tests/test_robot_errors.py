@@ -100,6 +100,19 @@ def test_unsupported_joint_type(tmp_path: Path) -> None:
         nearopt.Robot.from_urdf(write_urdf(tmp_path, types=("ball", "revolute")))
 
 
+def test_a_urdf_limit_beyond_no_limit_is_read_as_with_limits_reads_it(tmp_path: Path) -> None:
+    """velocity 1e300 in a URDF is no limit (its square overflowed in stage 1), and an effort
+    limit beyond NO_LIMIT is NO_LIMIT: as ``with_limits`` takes them."""
+    big = '<limit effort="1e300" velocity="1e300" lower="-3" upper="3"/>'
+    robot = nearopt.Robot.from_urdf(write_urdf(tmp_path, limits=(big, LIMIT)))
+    assert robot.limits.velocity[0] == np.inf and robot.limits.velocity[1] == 2.0
+    assert robot.limits.effort_upper[0] == nearopt.robot.NO_LIMIT
+    assert robot.limits.effort_lower[0] == -nearopt.robot.NO_LIMIT
+    same = robot.with_limits(effort=[1e300, 5.0], velocity=[1e300, 2.0])
+    np.testing.assert_array_equal(same.limits.velocity, robot.limits.velocity)
+    np.testing.assert_array_equal(same.limits.effort_upper, robot.limits.effort_upper)
+
+
 def test_continuous_joint_becomes_an_unbounded_angle(tmp_path: Path) -> None:
     robot = nearopt.Robot.from_urdf(write_urdf(tmp_path, types=("continuous", "revolute")))
     assert robot.model.nq == robot.n == 2

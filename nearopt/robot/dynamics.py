@@ -368,8 +368,9 @@ class Robot:
         )
         if no_effort and effort_limit is None:
             raise URDFError(
-                f"joint {no_effort[0]!r} of {path} declares no effort limit (<limit effort>); "
-                "set the actuator limits with effort_limit=... (--effort-limit)",
+                f"joint {no_effort[0]!r} of {path} declares no effort limit (its <limit "
+                "effort> is missing or 0); set the actuator limits with effort_limit=... "
+                "(--effort-limit)",
                 path=str(path),
             )
         try:
@@ -400,9 +401,10 @@ class Robot:
             if jn in continuous or lower[i] == upper[i]:
                 lower[i], upper[i] = -np.inf, np.inf
         velocity = np.array(model.velocityLimit, dtype=float)
-        velocity[velocity <= 0.0] = np.inf
-        effort_lower = np.array(model.lowerEffortLimit, dtype=float)
-        effort_upper = np.array(model.upperEffortLimit, dtype=float)
+        velocity[(velocity <= 0.0) | (velocity >= NO_LIMIT)] = np.inf  # as with_limits
+        # beyond NO_LIMIT an effort limit cannot bind: taken as NO_LIMIT, as with_limits does
+        effort_lower = np.maximum(np.array(model.lowerEffortLimit, dtype=float), -NO_LIMIT)
+        effort_upper = np.minimum(np.array(model.upperEffortLimit, dtype=float), NO_LIMIT)
         acceleration, jerk = _rate_arrays(arm.rates, names)
         robot = cls(
             model,
@@ -1032,7 +1034,8 @@ class Robot:
             if not h[i, i] > 1e-12:
                 raise URDFError(
                     f"joint {jn!r} of {self.urdf_path} moves no inertia (H[{i},{i}] = "
-                    f"{h[i, i]:g}): the links below it declare no <inertial>",
+                    f"{h[i, i]:g}): the links below it carry no mass or inertia (no <inertial>, "
+                    "or mass and inertia 0)",
                     path=str(self.urdf_path),
                 )
         if np.linalg.eigvalsh(h)[0] <= 0.0:
