@@ -260,6 +260,22 @@ def test_a_refined_run_the_iterate_grid_misjudges_goes_again_on_the_plans_grid()
     assert nearopt.verify_plan(result).passed
 
 
+def test_a_refined_path_stage_1_cannot_time_leaves_the_first_runs_plan() -> None:
+    """A z1 re-planned from a moving state (a fuzz pass's request): stage 2 converged, then
+    stage 1 could not time its path refined to 24 control points on the iterate grid (it would
+    have had to slow a moving end down) and the SolverError reached the user. The first run's
+    plan stands: verified, below the first path."""
+    robot = load("z1")
+    q0 = np.array([-0.86781436, 1.17117029, -1.09285336, 0.09980626, -0.43636156, -0.14939585])
+    qe = np.array([-0.04387486, 1.07969988, -1.16968315, -0.46929159, -0.11694305, 0.03739793])
+    qd0 = np.array([-1.5, 0.16652389, 0.13987032, 1.03605518, -0.58150842, -0.34006218])
+    line = nearopt.plan(robot, q0, qe, COST, qd0=qd0, max_iterations=0)
+    result = nearopt.plan(robot, q0, qe, COST, qd0=qd0)
+    assert result.status is nearopt.StopReason.CONVERGED
+    assert result.J < line.J
+    assert nearopt.verify_plan(result).passed
+
+
 @pytest.mark.parametrize("end", ["start", "end"])
 def test_a_joint_too_fast_to_stop_before_its_limit_is_named(end: str) -> None:
     """ur5's elbow 1e-6 rad below its upper limit, at 0.1 rad/s toward it at the start (away

@@ -1203,11 +1203,19 @@ def _refined(
     coarse = max(options.grid, 4 * count) < setup.grid  # the refined run's iterate grid
     if misjudged > GRID_TRUST and coarse:
         common, coarse = on_plan_grid, False
+
+    def run(settings: dict[str, object]) -> MethodOutcome:
+        try:
+            return _continued(
+                setup.robot, setup.q0, setup.qe, setup.cost, goal, first, fine, settings,
+                history, setup.collisions, via, setup.duration, setup.ends,
+            )  # fmt: skip
+        except (InfeasiblePathError, SolverError):  # e.g. the refined path cannot be timed
+            return first  # on the iterate grid (a z1 re-plan: stage 1 could not hold a moving
+            # end's limits between the samples): the first run's plan stands
+
     mark = len(history)
-    second = _continued(
-        setup.robot, setup.q0, setup.qe, setup.cost, goal, first, fine, common, history,
-        setup.collisions, via, setup.duration, setup.ends,
-    )  # fmt: skip
+    second = run(common)
     low = min((e.J for e in history[mark:]), default=np.inf)  # the refined iterates' lowest
     if coarse and second.timing.J > (1.0 + GRID_TRUST) * low:
         # the plan's grid puts what the refined run returned (or the first run's plan, where
@@ -1216,10 +1224,7 @@ def _refined(
         # plan's grid, a torque peak between the samples at the ends of a segment; 36 seeded
         # free plans: −0.23 … +0.06 %), so the refined run goes again on the plan's grid
         misjudged = second.timing.J / low - 1.0
-        again = _continued(
-            setup.robot, setup.q0, setup.qe, setup.cost, goal, first, fine, on_plan_grid,
-            history, setup.collisions, via, setup.duration, setup.ends,
-        )  # fmt: skip
+        again = run(on_plan_grid)
         second = again if again.timing.J < second.timing.J else second
     if second is first:
         return first
