@@ -376,3 +376,41 @@ def test_bad_tool_poses_and_via_lists_are_configuration_errors() -> None:
     with pytest.raises(nearopt.ConfigurationError, match="each a joint vector of 6 values"):
         nearopt.plan(robot, q0, qe, via=[0.0, -1.2, 1.2, -1.5, -1.57, 0.0])
     assert not nearopt.plan(robot, q0, qe, via=None, max_iterations=0).via
+
+
+def test_a_pose_goal_is_reached_in_the_turn_nearest_the_start() -> None:
+    """ur5, a fuzz pass's pose: inverse kinematics from θ0 came out with joints 1 and 6 a turn
+    (2π) away from θ0 (5.06 against 0.06, −6.23 against −0.39), and stage 2 cannot leave the turn
+    it starts in: J 4.80 against 2.14 for the same pose in the nearer turn. Each revolute joint of
+    the solution now lies within π of θ0 where its limits allow, the pose kept to 1e-10."""
+    robot = load("ur5")
+    q0 = np.array([0.059, 2.264, -0.894, 2.255, -0.946, -0.385])
+    qe = np.array([1.647, -0.456, 0.125, -2.375, 1.274, 0.192])
+    m = robot.frame_placement(qe)
+    pose = ToolPose(tuple(m.translation), tuple(pin.Quaternion(m.rotation).coeffs()))
+    solved = inverse_kinematics(robot, pose, seed=q0)
+    assert max(pose_error(robot, solved, pose)) < 1e-9
+    lim = robot.limits
+    for i in range(robot.n):
+        for turn in (-2.0 * np.pi, 2.0 * np.pi):
+            other = solved[i] + turn
+            if lim.position_lower[i] <= other <= lim.position_upper[i]:
+                assert abs(solved[i] - q0[i]) <= abs(other - q0[i]), (i, solved[i], q0[i])
+    result = nearopt.plan(robot, q0, pose, nearopt.TorqueCost(1e-3))
+    end = result.trajectory(np.array([result.duration]))[0]
+    assert np.all(np.abs(end - q0) <= np.pi + 1e-9), end
+    assert nearopt.verify_plan(result).passed
+
+
+def test_a_pose_goal_for_a_one_joint_arm(tmp_path: Path) -> None:
+    """Pinocchio gives a one-joint arm's frame Jacobian as a vector: inverse kinematics raised
+    numpy's ValueError from its solve (a fuzz pass's `--goal-pose` on a 1-DOF URDF)."""
+    from urdfs import write_urdf
+
+    robot = nearopt.Robot.from_urdf(write_urdf(tmp_path), locked_joints=("j2",))
+    assert robot.n == 1
+    pose = ToolPose(tuple(robot.frame_placement(np.array([0.8])).translation))
+    result = nearopt.plan(robot, np.array([0.0]), pose, nearopt.TorqueCost(1e-3))
+    end = result.trajectory(np.array([result.duration]))[0]
+    assert abs(end[0] - 0.8) < 1e-8, end
+    assert nearopt.verify_plan(result).passed

@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 
     from .dynamics import Robot
 
-__all__ = ["ToolPose", "inverse_kinematics", "pose_error", "task_jacobian"]
+__all__ = ["ToolPose", "inverse_kinematics", "nearest_turn", "pose_error", "task_jacobian"]
 
 
 @dataclass(frozen=True)
@@ -100,8 +100,15 @@ def task_jacobian(robot: Robot, pose: ToolPose, q: ArrayLike) -> NDArray[np.floa
     pin.computeJointJacobians(model, data, robot.check_configuration(q))
     pin.updateFramePlacements(model, data)
     if pose.quaternion is None:
-        return pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
-    return pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL)
+        return _frame_jacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
+    return _frame_jacobian(model, data, fid, pin.ReferenceFrame.LOCAL)
+
+
+def _frame_jacobian(
+    model: pin.Model, data: pin.Data, fid: int, frame: pin.ReferenceFrame
+) -> NDArray[np.float64]:
+    """Pinocchio's frame Jacobian as 6 × n (of a one-joint arm it returns a vector)."""
+    return np.asarray(pin.getFrameJacobian(model, data, fid, frame)).reshape(6, model.nv)
 
 
 def inverse_kinematics(
@@ -124,6 +131,8 @@ def inverse_kinematics(
     seed
         First guess [rad or m], shape (n,) (e.g. the motion's start); later attempts start from
         configurations drawn uniformly within the limits (seeded: the result is reproducible).
+        The solution's revolute joints are then turned by whole turns to lie nearest the seed
+        (:func:`nearest_turn`).
     attempts
         Starts tried.
     iterations
@@ -170,7 +179,7 @@ def inverse_kinematics(
             if best is None or norm < best[0]:
                 best = (norm, q.copy())
             if norm <= tolerance:
-                return q
+                return q if not starts else nearest_turn(robot, q, starts[0])
             step = np.linalg.solve(jac.T @ jac + damping * np.eye(robot.n), jac.T @ err)
             trial = np.clip(q + step, lim.position_lower, lim.position_upper)
             if np.linalg.norm(_error(model, data, fid, trial, target, full)[0]) < norm:
@@ -193,6 +202,24 @@ def inverse_kinematics(
     )
 
 
+def nearest_turn(
+    robot: Robot, q: NDArray[np.float64], reference: NDArray[np.float64]
+) -> NDArray[np.float64]:
+    """``q`` with each revolute joint turned by whole turns (2π rad) to lie nearest its value
+    in ``reference`` within the position limits: every link where ``q`` puts it. A pose goal
+    solved from θ0 came out with ur5 joints a turn away from θ0 (J 2.2 times the motion to the
+    nearer turn: stage 2 cannot leave the turn it starts in)."""
+    lim = robot.limits
+    out = q.copy()
+    turn = 2.0 * np.pi
+    for i in np.flatnonzero(~robot.prismatic):
+        k = np.round((reference[i] - q[i]) / turn)
+        shifted = q[i] + np.array([0.0, k - 1.0, k, k + 1.0]) * turn
+        inside = shifted[(shifted >= lim.position_lower[i]) & (shifted <= lim.position_upper[i])]
+        out[i] = inside[np.argmin(np.abs(inside - reference[i]))]
+    return out
+
+
 def _error(
     model: pin.Model,
     data: pin.Data,
@@ -206,8 +233,8 @@ def _error(
     pin.updateFramePlacements(model, data)
     current = data.oMf[fid]
     if not full:
-        jac = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
+        jac = _frame_jacobian(model, data, fid, pin.ReferenceFrame.LOCAL_WORLD_ALIGNED)[:3]
         return target.translation - current.translation, jac
     error = current.actInv(target)  # M⁻¹ M*
-    jac = pin.getFrameJacobian(model, data, fid, pin.ReferenceFrame.LOCAL)
+    jac = _frame_jacobian(model, data, fid, pin.ReferenceFrame.LOCAL)
     return pin.log6(error).vector, pin.Jlog6(error.inverse()) @ jac
