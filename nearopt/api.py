@@ -570,10 +570,8 @@ class Prepared:
 
 def _urdf_meshes(robot: Robot) -> list[Path]:
     """The mesh files a robot's URDF names (``<mesh filename=…>``: relative to the URDF's folder,
-    ``file://`` or ``package://`` in the known robots' folders), those that exist."""
+    ``file://``, or ``package://`` in :meth:`~nearopt.Robot.package_dirs`), those that exist."""
     import xml.etree.ElementTree as ET
-
-    from .catalog import package_dirs
 
     if robot.urdf_xml is None:
         return []
@@ -586,7 +584,7 @@ def _urdf_meshes(robot: Robot) -> list[Path]:
     for mesh in root.iter("mesh"):
         name = mesh.get("filename") or ""
         if name.startswith("package://"):
-            candidates = [base / name.removeprefix("package://") for base in package_dirs()]
+            candidates = [d / name.removeprefix("package://") for d in robot.package_dirs()]
         else:
             candidates = [folder / name.removeprefix("file://")]
         for path in candidates:
@@ -828,7 +826,7 @@ def _lock_values(pairs: tuple[str, ...]) -> dict[str, float]:
     """``JOINT=VALUE`` strings as a dict."""
     values = {}
     for pair in pairs:
-        name, sep, value = pair.partition("=")
+        name, sep, value = pair.rpartition("=")  # (a joint's name may hold "=")
         try:
             values[name] = float(value)
         except ValueError:

@@ -633,6 +633,18 @@ CASES = {
         ConfigurationError,
         "joint 'j2' cannot be locked at 4",
     ),
+    "a URDF path with a NUL character (a bare ValueError)": Case(
+        lambda p: nearopt.Robot.from_urdf(str(write_urdf(p)) + "\0x"),
+        None,
+        URDFError,
+        "a path holds no NUL character: the URDF",
+    ),
+    "a device as the URDF (it was called not found)": Case(
+        lambda p: nearopt.Robot.from_urdf("/dev/null"),
+        lambda p: ["--urdf", "/dev/null", "--q0", "0", "--qe", "1"],
+        URDFError,
+        "/dev/null is not a regular file",
+    ),
     "--lock-at without a value": Case(
         None,
         lambda p: [
@@ -1250,3 +1262,44 @@ def test_max_duration_inf_is_no_limit() -> None:
         two_link(), *GOOD, cost, grid=20, max_iterations=0, max_duration=np.inf
     )
     assert unbounded.J == free.J and unbounded.duration == free.duration
+
+
+def test_an_output_over_a_package_mesh_found_through_ros_package_path(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """A mesh named ``package://mypkg/…`` that Pinocchio finds through ROS_PACKAGE_PATH is one of
+    the request's inputs like any other mesh: ``--json`` onto it was written (the STL lost; a
+    fuzz pass's note)."""
+    import trimesh
+
+    meshes = tmp_path / "ws" / "mypkg" / "meshes"
+    meshes.mkdir(parents=True)
+    trimesh.creation.box((0.05, 0.05, 0.05)).export(meshes / "part.stl")
+    before = (meshes / "part.stl").read_bytes()
+    path = write_urdf(tmp_path)
+    visual = '<visual><geometry><mesh filename="package://mypkg/meshes/part.stl"/></geometry>'
+    head, tail = path.read_text().split('<link name="b">', 1)
+    path.write_text(f'{head}<link name="b">{visual}</visual>{tail}')
+    monkeypatch.setenv("ROS_PACKAGE_PATH", str(tmp_path / "ws"))
+    done = run_cli("plan", "--urdf", str(path), *ONE_RAD[2:], "--json", str(meshes / "part.stl"))
+    assert done.returncode != 0
+    assert "part.stl is a mesh of the URDF" in done.stderr, done.stderr
+    assert (meshes / "part.stl").read_bytes() == before
+
+
+def test_lock_at_a_joint_whose_name_holds_an_equals_sign(tmp_path: Path) -> None:
+    """``--lock-at a=b=0.5`` locks joint ``a=b`` at 0.5 (it was refused: split at the first =)."""
+    path = write_urdf(tmp_path)
+    path.write_text(path.read_text().replace('name="j2"', 'name="a=b"'))
+    request = PlanRequest(urdf=str(path), lock=("a=b",), lock_at=("a=b=0.5",), q0=(0,), qe=(1,))
+    outcome = run(request)
+    assert outcome.prepared.robot.locked_joints == ("a=b",)
+    zero = np.zeros(1)
+
+    def gravity(robot: nearopt.Robot) -> np.ndarray:  # j1's, with link b's centre at 0.5 rad
+        return robot.inverse_dynamics(zero, zero, zero)
+
+    locked = nearopt.Robot.from_urdf(path, locked_joints=("a=b",), lock_at={"a=b": 0.5})
+    np.testing.assert_allclose(gravity(outcome.prepared.robot), gravity(locked))
+    at_zero = nearopt.Robot.from_urdf(path, locked_joints="a=b")
+    assert not np.allclose(gravity(locked), gravity(at_zero))

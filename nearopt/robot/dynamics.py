@@ -48,6 +48,13 @@ _ONE_DOF_JOINTS = (
 )
 
 
+def _check_no_nul(urdf: object, srdf: object) -> None:
+    """A URDFError where a path holds a NUL character (the OS would raise a bare ValueError)."""
+    for given, what in ((urdf, "URDF"), (srdf, "SRDF")):
+        if given is not None and "\0" in str(given):
+            raise URDFError(f"a path holds no NUL character: the {what} {str(given)!r:.80}")
+
+
 def _readonly(x: ArrayLike) -> NDArray[np.float64]:
     a = np.array(x, dtype=float)
     a.setflags(write=False)
@@ -350,6 +357,7 @@ class Robot:
         """
         if not isinstance(path, str | os.PathLike) or not str(path):
             raise URDFError(f"a URDF is given by its file's path, got {path!r:.60}")
+        _check_no_nul(path, srdf)
         path = Path(path).expanduser().resolve()
         if group is not None and srdf is None:
             raise ConfigurationError("a group needs its SRDF (srdf=...): the group is read from it")
@@ -402,9 +410,8 @@ class Robot:
                 lower[i], upper[i] = -np.inf, np.inf
         velocity = np.array(model.velocityLimit, dtype=float)
         velocity[(velocity <= 0.0) | (velocity >= NO_LIMIT)] = np.inf  # as with_limits
-        # beyond NO_LIMIT an effort limit cannot bind: taken as NO_LIMIT, as with_limits does
-        effort_lower = np.maximum(np.array(model.lowerEffortLimit, dtype=float), -NO_LIMIT)
-        effort_upper = np.minimum(np.array(model.upperEffortLimit, dtype=float), NO_LIMIT)
+        effort_upper = np.minimum(model.upperEffortLimit, NO_LIMIT)  # (a larger one: NO_LIMIT)
+        effort_lower = np.maximum(model.lowerEffortLimit, -NO_LIMIT)  # as with_limits takes it
         acceleration, jerk = _rate_arrays(arm.rates, names)
         robot = cls(
             model,
@@ -933,15 +940,23 @@ class Robot:
         """
         return self._geometry(pin.GeometryType.COLLISION)
 
+    def package_dirs(self) -> list[Path]:
+        """The folders in which a ``package://NAME/…`` mesh URI of this robot's URDF is
+        resolved (as ``folder/NAME/…``), in Pinocchio's order: the URDF's own folder, the known
+        robots' (example-robot-data), then those of ``ROS_PACKAGE_PATH``."""
+        dirs = [] if self.urdf_path is None else [Path(self.urdf_path).parent]
+        try:
+            dirs += catalog.package_dirs()
+        except URDFError:
+            pass
+        ros = os.environ.get("ROS_PACKAGE_PATH", "")
+        return dirs + [Path(d) for d in ros.split(os.pathsep) if d]
+
     def _geometry(self, kind: pin.GeometryType) -> pin.GeometryModel:
         what = "visuals" if kind == pin.GeometryType.VISUAL else "collision geometry"
         if self.urdf_xml is None or self.urdf_path is None:
             raise URDFError(f"robot {self.name!r} was not built from a URDF; it has no {what}")
-        dirs = [str(self.urdf_path.parent)]
-        try:
-            dirs += [str(d) for d in catalog.package_dirs()]
-        except URDFError:
-            pass
+        dirs = [str(d) for d in self.package_dirs()]
         full = pin.buildModelFromXML(self.urdf_xml)
         try:
             geom = pin.buildGeomFromUrdfString(full, self.urdf_xml, kind, package_dirs=dirs)

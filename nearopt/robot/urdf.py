@@ -439,8 +439,10 @@ def _parse(path: Path) -> ET.Element:
     """The URDF's root element, ``<robot>``."""
     if path.is_dir():
         raise URDFError(f"{path} is a directory, not a URDF file", path=str(path))
-    if not path.is_file():
+    if not path.exists():
         raise URDFError(f"URDF file not found: {path}", path=str(path))
+    if not path.is_file():
+        raise URDFError(f"{path} is not a regular file (a URDF is one)", path=str(path))
     try:
         root = ET.parse(path).getroot()
     except ET.ParseError as exc:
