@@ -652,3 +652,33 @@ def test_speed_lines_stay_under_the_speed_bound() -> None:
     assert np.all(exact >= dense - 1e-12)  # no sample above it
     # and none far below: the samples' spacing 1/2000 misses at most |x'g'| / 2000² / 4
     assert np.all(exact - dense <= np.abs(dx * (g1 - g0)) / 1.6e7 + 1e-12)
+
+
+HEAVILY_DAMPED = """<robot name="damped"><link name="base"/>
+<joint name="j1" type="revolute"><parent link="base"/><child link="l1"/><axis xyz="0 1 0"/>
+<limit effort="50" velocity="3" lower="-3" upper="3"/><dynamics damping="{damping}"/></joint>
+<link name="l1"><inertial><origin xyz="0 0 0.1"/><mass value="1.0"/>
+<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link></robot>"""
+
+
+@pytest.mark.parametrize("damping", [20.0, 50.0])
+def test_a_heavily_damped_joint_is_timed_at_its_optimum(tmp_path, damping: float) -> None:
+    """A fuzz pass's arm: one joint whose damping torque D θ̇ outweighs everything else
+    (f0 = 1 + 0.1 u²). The kernel's Newton matrix stayed indefinite through its 14 shifts and
+    Clarabel's SOCP with the damping linearised took over: at D = 20 it stopped at J 65.8
+    (t_e 0.62 s), where slowing the same b down uniformly to 1 % gives 11.3; at D = 50 it found
+    the line infeasible. Now the kernel's own optimum, stationary along that slow-down, and the
+    finer grid's (11.01 at D = 20)."""
+    path = tmp_path / "damped.urdf"
+    path.write_text(HEAVILY_DAMPED.format(damping=damping))
+    robot = nearopt.Robot.from_urdf(path)
+    cost = TorqueCost(0.1)
+    line = StraightPath(np.zeros(1), np.ones(1))
+    timing = optimal_timing(robot, line, cost)
+    disc = Discretisation.of(timing.problem)
+    z = timing.b[1:-1]
+    for alpha in (0.3, 0.9, 0.99, 1.01, 1.1):  # no uniform change of speed lowers it
+        assert disc.objective(alpha * z, cost)[0] >= timing.objective * (1 - 1e-6), alpha
+    finer = optimal_timing(robot, line, cost, grid=1000)
+    assert abs(timing.J / finer.J - 1.0) < 2e-3, (timing.J, finer.J)
+    assert_independent_checks(robot, timing.trajectory, cost, timing.J, np.zeros(1), np.ones(1))

@@ -279,7 +279,8 @@ def _rows(
 @inline_jit(fastmath=FAST, error_model="numpy")
 def _factor(hdiag, hoff, scale, dd, ll):  # pragma: no cover - compiled
     """L D Lᵀ of D M D (M tridiagonal: hdiag, hoff; D = diag(scale)) into dd, ll, shifted by
-    the smallest multiple of its size that makes it positive definite; False if none does."""
+    the smallest multiple of its size (up to 10⁷: a joint whose damping torque outweighs the
+    rest needed more than 1) that makes it positive definite; False if none does."""
     nf = dd.size
     size = 0.0
     for i in range(nf):
@@ -287,7 +288,7 @@ def _factor(hdiag, hoff, scale, dd, ll):  # pragma: no cover - compiled
             size = abs(hdiag[i + 1] * scale[i] * scale[i])
     delta = 0.0
     ok = False
-    for _attempt in range(14):
+    for _attempt in range(20):
         ok = True
         for i in range(nf):
             dd[i] = hdiag[i + 1] * scale[i] * scale[i] + delta * size

@@ -227,7 +227,7 @@ def solve_interior(
     weights: NDArray[np.float64],
     *,
     tolerance: float = 1e-10,
-    max_iterations: int = 150,
+    max_iterations: int = 300,
     deadline: float = np.inf,
     guess: NDArray[np.float64] | None = None,
     reduce: bool = True,
