@@ -69,6 +69,13 @@ def urdf_with_mesh(tmp_path: Path) -> Path:
     return path
 
 
+def bad_group(tmp_path: Path) -> Path:
+    """An SRDF whose group 'bad' names only a joint the chain of :func:`write_urdf` lacks."""
+    path = tmp_path / "bad.srdf"
+    path.write_text('<robot name="chain"><group name="bad"><joint name="nope"/></group></robot>')
+    return path
+
+
 def urdf_with_meshes_of_one_name(tmp_path: Path) -> Path:
     """The chain of :func:`write_urdf` drawn by three files of the same name in three folders
     (link a: x/part.stl; link b: y/part.stl and z/part.stl)."""
@@ -661,6 +668,21 @@ CASES = {
         ],
         ConfigurationError,
         "JOINT=VALUE",
+    ),
+    "an SRDF group of joints the URDF lacks (it said the URDF had no moving joint)": Case(
+        lambda p: nearopt.Robot.from_urdf(write_urdf(p), srdf=bad_group(p), group="bad"),
+        lambda p: [
+            *("--urdf", str(write_urdf(p)), "--srdf", str(bad_group(p)), "--group", "bad"),
+            *("--q0", "0", "--qe", "1"),
+        ],
+        URDFError,
+        "holds no moving joint of",
+    ),
+    "a dict as q0 (it was called a single number)": Case(
+        lambda p: nearopt.plan(two_link(), {"joint1": 0, "joint2": 0}, [1, 1]),
+        None,
+        ConfigurationError,
+        "q0 is a list of 2 values in the joints' order (joint1, joint2), not a dict",
     ),
     "--srdf that does not exist": Case(
         lambda p: nearopt.Robot.from_urdf(PANDA_URDF, srdf=p / "nope.srdf", group="panda_arm"),

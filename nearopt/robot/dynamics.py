@@ -971,6 +971,11 @@ class Robot:
     def check_configuration(self, q: ArrayLike, what: str = "configuration") -> NDArray[np.float64]:
         """Return q as a float array of shape (n,), or raise a :class:`ConfigurationError` (a
         single number is refused: a configuration has a value per joint)."""
+        if isinstance(q, dict):  # (np.ndim of a dict is 0: it was called a single number)
+            raise ConfigurationError(
+                f"{what} is a list of {self.n} values in the joints' order "
+                f"({', '.join(self.joint_names)}), not a dict"
+            )
         if self.n > 1 and np.ndim(q) == 0 and q is not None and not isinstance(q, str):
             raise ConfigurationError(
                 f"{what} must have {self.n} values (one per joint of {self.name}: "

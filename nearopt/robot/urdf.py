@@ -347,9 +347,15 @@ def srdf_group_locks(root: ET.Element, path: Path, srdf: Path, group: str) -> tu
                 collect(item.get("name"), (*seen, name))
 
     collect(group, ())
-    return tuple(
-        j.get("name") for j in joints if j.get("type") != "fixed" and j.get("name") not in members
-    )
+    moving = [j.get("name") for j in joints if j.get("type") != "fixed"]
+    if not members & set(moving):  # (a name the URDF lacks, e.g. a virtual joint, is ignored)
+        unknown = sorted(members - {j.get("name") for j in joints})
+        raise URDFError(
+            f"SRDF group {group!r} of {srdf} holds no moving joint of {path}"
+            + (f"; it names joint(s) {unknown} the URDF does not have" if unknown else ""),
+            path=str(srdf),
+        )
+    return tuple(name for name in moving if name not in members)
 
 
 def read_urdf(
