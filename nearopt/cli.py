@@ -498,6 +498,8 @@ def _plan_command(args: argparse.Namespace, interrupt: _Interrupt) -> int:
     out = ReaderTolerant(sys.stderr if to_stdout else sys.stdout)
     prepared = prepare(request)
     refuse_inputs(outputs, prepared.input_files())
+    if args.html or args.show:  # meshes that cannot be loaded are named before planning
+        prepared.robot.visual_model()
     quiet = args.quiet or args.stage1_only
 
     def progress(entry: Iteration) -> None:

@@ -1325,3 +1325,19 @@ def test_lock_at_a_joint_whose_name_holds_an_equals_sign(tmp_path: Path) -> None
     np.testing.assert_allclose(gravity(outcome.prepared.robot), gravity(locked))
     at_zero = nearopt.Robot.from_urdf(path, locked_joints="a=b")
     assert not np.allclose(gravity(locked), gravity(at_zero))
+
+
+def test_html_with_a_mesh_that_cannot_be_loaded_is_refused_before_planning(
+    tmp_path: Path,
+) -> None:
+    """--html needs the URDF's visuals: a mesh file that is not there is named before any
+    planning (it was named after the plan, which was lost; a fuzz pass's note)."""
+    path = write_urdf(tmp_path)
+    visual = '<visual><geometry><mesh filename="meshes/none.stl"/></geometry></visual>'
+    head, tail = path.read_text().split('<link name="b">', 1)
+    path.write_text(f'{head}<link name="b">{visual}{tail}')
+    done = run_cli("plan", "--urdf", str(path), *ONE_RAD[2:], "--html", str(tmp_path / "a.html"))
+    assert done.returncode != 0
+    assert "cannot load the visuals" in done.stderr and "none.stl" in done.stderr, done.stderr
+    assert "iteration" not in done.stdout and "converged" not in done.stdout, done.stdout
+    assert not (tmp_path / "a.html").exists()
