@@ -220,41 +220,41 @@ def test_replanning_a_nearly_stopped_arm_costs_what_replanning_it_at_rest_does(s
     np.testing.assert_allclose(moving.trajectory.states(np.zeros(1))[1][0], qd[0], atol=1e-12)
 
 
-def test_a_moving_start_the_iterate_grid_misjudges_is_iterated_on_the_plans_grid() -> None:
-    """A ur5 re-planned from half-way through a motion (the state of bench_moving_ends, seed 2):
-    the 64-segment iterate grid put the iterates' J 1.4 % below the plan's grid, and stage 2
-    followed its error (J 3.8697, IPOPT 3.8230). The refined run iterates on the plan's grid
-    then: J within 0.1 % of stage 2 iterating on the plan's grid throughout."""
+MISJUDGED = {  # ur5 states (θ, θ̇) re-planned to a goal, where the iterate grid misjudged J
+    "first run": (
+        [-0.7135679882310813, -1.3088863415237113, 0.8771095912489432,
+         0.19078439526299132, 0.13444138006510262, 0.5529208353512008],
+        [-0.3561401174488957, -0.4253849067093328, -3.1499946869036934,
+         2.45275117146624, -0.20673051051738514, -3.047731947116208],
+        [-0.1616861020685108, 0.4063135165788487, -0.18531678415169328,
+         0.3196425582578794, 1.1218462859848242, 0.43935557354310073],
+    ),
+    "refined run": (
+        [5.266694379911429, -1.054214877725254, 3.141592651675804,
+         -4.55013899836392, 2.609722257266815, -2.1555683859563692],
+        [0.40471901869681637, -2.7520352134475883, -1.1897780548427992e-08,
+         -0.6823314519083521, 3.199985825483901, 1.9999335144711137],
+        [5.654866776461628, -3.143891665462093, 2.827433388231,
+         -4.298885742878067, 5.257672861932282, -1.6265816502394403],
+    ),
+}  # fmt: skip
+
+
+@pytest.mark.parametrize("case", sorted(MISJUDGED))
+def test_a_run_the_iterate_grid_misjudges_goes_on_on_the_plans_grid(case: str) -> None:
+    """First run: a ur5 re-planned from half-way through a motion (the state of
+    bench_moving_ends, seed 2): the 64-segment iterate grid put the iterates' J 1.4 % below the
+    plan's grid, and stage 2 followed its error (J 3.8697, IPOPT 3.8230); the refined run
+    iterates on the plan's grid then. Refined run: a ur5 re-planned to its own goal from 0.35 of
+    its plan (a fuzz pass's state): the first run was judged right, but the refined run's
+    iterates (96 segments) fell to J 1.310 while their path costs 1.561 on the plan's grid (a
+    torque peak between the samples at the ends of a segment), so the plan kept the first run's
+    1.4980, 4.8 % above the rest of the plan it came from (1.4288); it goes again on the plan's
+    grid. Either way J within 0.1 % of stage 2 on the plan's grid throughout."""
     robot = load("ur5")
-    q = np.array([-0.7135679882310813, -1.3088863415237113, 0.8771095912489432,
-                  0.19078439526299132, 0.13444138006510262, 0.5529208353512008])  # fmt: skip
-    qd = np.array([-0.3561401174488957, -0.4253849067093328, -3.1499946869036934,
-                   2.45275117146624, -0.20673051051738514, -3.047731947116208])  # fmt: skip
-    q2 = np.array([-0.1616861020685108, 0.4063135165788487, -0.18531678415169328,
-                   0.3196425582578794, 1.1218462859848242, 0.43935557354310073])  # fmt: skip
+    q, qd, q2 = (np.array(x) for x in MISJUDGED[case])
     result = nearopt.plan(robot, q, q2, COST, qd0=qd)
     fine = nearopt.plan(robot, q, q2, COST, qd0=qd, options=nearopt.SCPOptions(grid=200))
-    assert "iterated on the plan's grid" in result.message
-    assert result.J <= fine.J * (1 + 1e-3), (result.J, fine.J)
-    assert nearopt.verify_plan(result).passed
-
-
-def test_a_refined_run_the_iterate_grid_misjudges_goes_again_on_the_plans_grid() -> None:
-    """A ur5 re-planned to its own goal from 0.35 of its plan (a fuzz pass's state): the first
-    run was judged right, but the refined run's iterates (96 segments) fell to J 1.310 while
-    their path costs 1.561 on the plan's grid (a torque peak between the samples at the ends of
-    a segment), so the plan kept the first run's 1.4980, 4.8 % above the rest of the plan it
-    came from (1.4288). The refined run goes again on the plan's grid: J within 0.1 % of stage 2
-    on the plan's grid throughout."""
-    robot = load("ur5")
-    q = np.array([5.266694379911429, -1.054214877725254, 3.141592651675804,
-                  -4.55013899836392, 2.609722257266815, -2.1555683859563692])  # fmt: skip
-    qd = np.array([0.40471901869681637, -2.7520352134475883, -1.1897780548427992e-08,
-                   -0.6823314519083521, 3.199985825483901, 1.9999335144711137])  # fmt: skip
-    qe = np.array([5.654866776461628, -3.143891665462093, 2.827433388231,
-                   -4.298885742878067, 5.257672861932282, -1.6265816502394403])  # fmt: skip
-    result = nearopt.plan(robot, q, qe, COST, qd0=qd)
-    fine = nearopt.plan(robot, q, qe, COST, qd0=qd, options=nearopt.SCPOptions(grid=200))
     assert "iterated on the plan's grid" in result.message
     assert result.J <= fine.J * (1 + 1e-3), (result.J, fine.J)
     assert nearopt.verify_plan(result).passed
