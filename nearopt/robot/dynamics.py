@@ -290,11 +290,14 @@ class Robot:
         self.srdf = srdf
         self._tip_id = _frame_id(model, tip, name)
         self._has_damping = bool(np.any(self.damping != 0.0))
+        self._visuals: pin.GeometryModel | None = None  # loaded on first use (visual_model)
 
     def __getstate__(self) -> dict:
-        """What pickling keeps (a Dask worker's copy): all but the RNEA pool, made again there."""
+        """What pickling keeps (a Dask worker's copy): all but the RNEA pool and the visuals,
+        made again there."""
         state = self.__dict__.copy()
         state["_pool"] = None
+        state["_visuals"] = None
         return state
 
     # ------------------------------------------------------------------ construction
@@ -927,7 +930,9 @@ class Robot:
         URDFError
             If the robot was not built from a URDF, or a mesh cannot be found.
         """
-        return self._geometry(pin.GeometryType.VISUAL)
+        if self._visuals is None:  # loaded once (0.35 s on panda): the command line loads
+            self._visuals = self._geometry(pin.GeometryType.VISUAL)  # them before planning too
+        return self._visuals.copy()
 
     def collision_geometry(self) -> pin.GeometryModel:
         """The URDF's ``<collision>`` geometry (meshes as coal's triangle models), attached to
