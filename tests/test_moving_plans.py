@@ -65,6 +65,29 @@ def test_a_moving_start_is_kept_and_stage_2_beats_the_line(name: str) -> None:
         assert result.iterations > 0
 
 
+@pytest.mark.parametrize("name", ARMS)
+def test_a_moving_arm_sent_back_to_where_it_is_brakes_and_comes_back(name: str) -> None:
+    """θe = θ0 from a moving state is a motion (refused as zero-length before), and a goal
+    1e-9 rad away is planned like it (its first path's end legs were 1e-10 rad long, off qd0's
+    ray by rounding)."""
+    robot, q, qd, _ = moving_state(name, 3)
+    away = np.random.default_rng(0).normal(size=robot.n)
+    plans = {
+        offset: nearopt.plan(robot, q, q + offset * away / np.linalg.norm(away), COST, qd0=qd)
+        for offset in (0.0, 1e-9, 1e-3)
+    }
+    for offset, result in plans.items():
+        report = nearopt.verify_plan(result)
+        assert report.passed, str(report)
+        theta, speed = result.trajectory.states(np.linspace(0.0, result.duration, 2001))[:2]
+        assert np.max(np.abs(speed[0] - qd)) <= 1e-9 * np.max(np.abs(qd))
+        assert np.max(np.abs(theta[-1] - q)) <= offset + 1e-9
+        assert np.max(np.abs(speed[-1])) <= 1e-9
+        assert np.max((theta - q) @ qd) > 0.0  # it goes on along qd0 before it comes back
+    assert plans[1e-9].J == pytest.approx(plans[0.0].J, rel=1e-6)
+    assert plans[1e-3].J == pytest.approx(plans[0.0].J, rel=0.05)  # J is continuous in θe
+
+
 def test_a_moving_start_under_a_duration_meets_it() -> None:
     robot, q, qd, q2 = moving_state("ur5", 4)
     free = nearopt.plan(robot, q, q2, COST, qd0=qd, time_limit=60.0)

@@ -239,6 +239,7 @@ def plan(
         setup = replace(setup, duration=_check_duration(setup, duration, max_duration))
     if qd0 is not None or qde is not None:
         setup = replace(setup, ends=_check_ends(setup, qd0, qde))
+    _check_moves(setup)
     initial, outcome, via_s = _planned(setup, callback, verbose)
     timing, reason, message, evaluations, history = outcome
     if setup.robot.limits.smooth:  # stage 2 goes on under the jerk (torque-rate) limits
@@ -620,6 +621,22 @@ def _check_ends(
     return ends
 
 
+def _check_moves(setup: Segment) -> None:
+    """ConfigurationError where θe = θ0, no via-point and both ends at rest: there is nothing to
+    plan. (From a moving state, θe = θ0 is a motion: the arm brakes and comes back.)"""
+    moving = any(v is not None for v in setup.ends)
+    if moving or setup.vias or not np.array_equal(setup.q0, setup.qe):
+        return
+    if setup.goal is not None:
+        raise ConfigurationError(
+            f"the {setup.goal.frame or setup.robot.tip!r} frame already holds the goal pose at "
+            "q0: there is nothing to plan (the arm stays where it is)"
+        )
+    raise ConfigurationError(
+        "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
+    )
+
+
 def _fastest(setup: Segment, path: Path) -> float:
     """t_e of the time-optimal timing of a path [s]: the larger on the plan's grid and on
     stage 2's iterates' (coarser grids time a path a little slower)."""
@@ -694,15 +711,6 @@ def _setup(
     vias = _via_points(robot, via, q0, qe, position_limits)
     if vias and method != Method.SCP:
         raise ConfigurationError("via-points need method 'scp' (the B-spline path)")
-    if np.array_equal(q0, qe) and not vias:
-        if goal is not None:
-            raise ConfigurationError(
-                f"the {goal.frame or robot.tip!r} frame already holds the goal pose at q0: there "
-                "is nothing to plan (the arm stays where it is)"
-            )
-        raise ConfigurationError(
-            "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
-        )
     shortest, joint = minimum_duration(robot, q0, qe, velocity_limits)
     if shortest > MAX_DURATION:
         raise ConfigurationError(

@@ -273,6 +273,12 @@ def around_obstacles(
     )
 
 
+LEAST_LEG = 1e-6
+"""The shortest end leg of a first path leaving along a velocity, relative to the end's largest
+|θ| (at least 1 rad): a control point within about 1e-8 of that |θ| of its end would be off the
+velocity's ray by rounding (stage 1 holds the direction to 1e-8)."""
+
+
 def _leaving_line(setup: Segment) -> BSplinePath:
     """The straight line with the plan's boundary velocities
     (:func:`~nearopt.planning.ends.leaving_along`): of the end legs of 1, 2, 4 and 8 times the
@@ -309,6 +315,14 @@ def _leaving_line(setup: Segment) -> BSplinePath:
         for d, h, v in zip(brake, base, setup.ends, strict=True)
     ):
         legs += [(f * brake[0], f * brake[1]) for f in (1.0, 2.0)]
+    # and none so short that rounding turns it off its ray (a goal 1e-9 rad away: a leg of
+    # 1e-10 rad left θ0 2e-6 off qd0's direction, which stage 1 refused)
+    least = [LEAST_LEG * max(1.0, float(np.max(np.abs(q)))) for q in (setup.q0, setup.qe)]
+    legs = [
+        leg
+        for leg in legs
+        if all(v is None or d >= m for d, m, v in zip(leg, least, setup.ends, strict=True))
+    ]
     first_error: NearoptError | None = None
     best: tuple[float, BSplinePath] | None = None
     for path in leaving_along(robot, line, setup.ends, (lower, upper), legs, setup.velocity_limits):
