@@ -100,6 +100,30 @@ def test_a_moving_start_under_a_duration_meets_it() -> None:
     assert np.max(np.abs(states - qd)) <= 1e-9 * np.max(np.abs(qd))
 
 
+@pytest.mark.parametrize("seed", [1, 2, 4])
+def test_a_duration_the_plan_without_it_meets_is_planned(seed: int) -> None:
+    """so101 states 0.7 of the way through a plan, re-planned to a new goal under a duration of
+    1 and 1.05 times the t_e of the plan without it: all six were refused before (the first
+    path and the time-optimal plan's path too slow, or timed only on the plan's grid; T at the
+    free plan's own t_e 1.2e-15 below its path's time-optimal motion)."""
+    robot = load("so101")
+    rng = np.random.default_rng(seed)
+    lo, hi = robot.limits.position_lower, robot.limits.position_upper
+    q0, q1, q2 = rng.uniform(
+        0.5 * (lo + hi) - 0.4 * (hi - lo), 0.5 * (lo + hi) + 0.4 * (hi - lo), (3, robot.n)
+    )
+    before = nearopt.plan(robot, q0, q1, COST)
+    q, qd = (x[0] for x in before.trajectory.states(np.array([0.7 * before.duration]))[:2])
+    free = nearopt.plan(robot, q, q2, COST, qd0=qd)
+    for factor in (1.0, 1.05):
+        result = nearopt.plan(robot, q, q2, COST, qd0=qd, duration=factor * free.duration)
+        report = nearopt.verify_plan(result)
+        assert report.passed, str(report)
+        assert result.duration == pytest.approx(factor * free.duration, rel=1e-9)
+        if factor == 1.0:  # the plan without the duration meets it: J no higher
+            assert result.J <= free.J * (1.0 + 1e-9)
+
+
 def test_bad_boundary_velocities_are_refused_naming_the_joint() -> None:
     robot, q, qd, q2 = moving_state("ur5", 3)
     names, limit = robot.joint_names, robot.limits.velocity

@@ -269,13 +269,15 @@ def _planned(
     """The checked request planned: the first path timed, stage 2's outcome (the better of the
     runs it takes) and the via-points' σ."""
     line, start, via_s = first_path(setup)
+    first = (line, start)  # the plan without a duration starts from it
+    run = setup  # (under a duration, maybe on the plan's grid: see _fast_enough)
     if setup.duration is not None:
-        line, start = _fast_enough(setup, line, start, via_s)
-    initial = _time_first_path(setup, line, start)
-    outcome = _lowest(setup, *_starts(setup, line, start, via_s, initial, callback, verbose))
+        run, line, start = _fast_enough(setup, line, start, via_s)
+    initial = _time_first_path(run, line, start)
+    outcome = _lowest(run, *_starts(run, line, start, via_s, initial, callback, verbose))
     again = setup.max_iterations > 0 and outcome[1] is not StopReason.INTERRUPTED
     if again and setup.duration is not None and setup.method == Method.SCP:
-        outcome = _from_free_plan(setup, line, start, via_s, outcome, callback, verbose)
+        outcome = _from_free_plan(setup, *first, via_s, outcome, callback, verbose)
     again = again and outcome[1] is not StopReason.INTERRUPTED
     if again and any(v is not None for v in setup.ends) and all(resting_ends(setup)):
         outcome = _from_rest_plan(setup, via_s, outcome, callback, verbose)
@@ -310,11 +312,15 @@ def _from_free_plan(
             path = plan_free[0].trajectory.path
             if time.perf_counter() >= setup.deadline:
                 break
-            if _fastest(setup, path) > setup.duration[0]:
+            found = _fastest_on(setup, path)
+            if not _meets(found[0], setup.duration[0]):
                 continue
             fits.append(plan_free)
-            initial = _time_first_path(setup, path, path)
-            second = _improve(setup, path, path, via_s, initial, callback, verbose)
+            run = setup  # on the plan's grid where only that times it as fast as T
+            if not _meets(found[1], setup.duration[0]):
+                run = replace(setup, options=replace(setup.options, grid=setup.grid))
+            initial = _time_first_path(run, path, path)
+            second = _improve(run, path, path, via_s, initial, callback, verbose)
             spent += second[3]
             best = _lower(best, second, spent, "without the duration")
             if second[1] is StopReason.INTERRUPTED:
@@ -547,30 +553,42 @@ def _from_rest_plan(
 
 def _fast_enough(
     setup: Segment, line: Path, start: Path | None, via_s: tuple[float, ...]
-) -> tuple[Path, Path | None]:
+) -> tuple[Segment, Path, Path | None]:
     """The first path, if it can be as fast as the plan's duration; else the path stage 2
-    finds for the time-optimal cost (the first path of the plan then), if that can; else
-    InfeasiblePathError with the fastest motion found."""
+    finds for the time-optimal cost, else the one it finds without the duration (the first
+    path of the plan then), if that can; else InfeasiblePathError with the fastest motion
+    found. A path only the plan's grid times as fast as T (the iterate grid is coarser: a
+    moving start's first segment, or T at the free plan's own t_e) is improved on the plan's
+    grid (the request returned with that grid for stage 2)."""
     duration, exact = setup.duration
     word = "duration" if exact else "max_duration"
-    fastest = _fastest(setup, line)
-    if fastest <= duration:
-        return line, start
-    if setup.max_iterations == 0:
+    fastest = _fastest_on(setup, line)
+    if _meets(max(fastest), duration):
+        return setup, line, start
+    on_plan_grid = replace(setup, options=replace(setup.options, grid=setup.grid))
+    if setup.max_iterations == 0 or _meets(fastest[0], duration):
+        if _meets(fastest[0], duration):
+            return on_plan_grid, line, start
         raise InfeasiblePathError(
             f"{word} {duration:.9g} s is shorter than the time-optimal motion along the first "
-            f"path, {fastest:.9g} s"
+            f"path, {max(fastest):.9g} s"
         )
-    quick = replace(setup, cost=TimeCost(), duration=None)
-    first = _time_first_path(quick, line, start)
-    timing = _improve(quick, line, start, via_s, first, None, False)[0]
-    quickest = _fastest(setup, timing.trajectory.path)
-    if quickest > duration:
-        raise InfeasiblePathError(
-            f"{word} {duration:.6g} s is shorter than the time-optimal motion along the first "
-            f"path ({fastest:.6g} s) and along the fastest path stage 2 found ({quickest:.6g} s)"
-        )
-    return timing.trajectory.path, timing.trajectory.path
+    quickest = np.inf
+    for request in (replace(setup, cost=TimeCost(), duration=None), replace(setup, duration=None)):
+        try:  # the time-optimal plan's path; the plan's without the duration (a slower basin)
+            first = _time_first_path(request, line, start)
+            path = _improve(request, line, start, via_s, first, None, False)[0].trajectory.path
+        except (InfeasiblePathError, SolverError):
+            continue
+        found = _fastest_on(setup, path)
+        quickest = min(quickest, found[0])
+        if _meets(found[0], duration):
+            return (setup if _meets(found[1], duration) else on_plan_grid), path, path
+    found = "stage 2 timed no path" if quickest == np.inf else "along the fastest path stage 2"
+    raise InfeasiblePathError(
+        f"{word} {duration:.9g} s is shorter than the time-optimal motion along the first "
+        f"path ({fastest[0]:.9g} s) and {found} found ({quickest:.9g} s)"
+    )
 
 
 def _check_duration(setup: Segment, duration: object, max_duration: object) -> tuple[float, bool]:
@@ -637,23 +655,41 @@ def _check_moves(setup: Segment) -> None:
     )
 
 
-def _fastest(setup: Segment, path: Path) -> float:
-    """t_e of the time-optimal timing of a path [s]: the larger on the plan's grid and on
-    stage 2's iterates' (coarser grids time a path a little slower)."""
-    grids = {setup.grid}
-    if setup.max_iterations > 0:  # stage 2 times its iterates on its own grid
-        grids.add(min(setup.grid, getattr(setup.options, "grid", setup.grid)))
-    return max(
-        optimal_timing(
-            setup.robot,
-            path,
-            grid=g,
-            velocity_limits=setup.velocity_limits,
-            qd0=setup.ends[0],
-            qde=setup.ends[1],
-        ).duration
-        for g in grids
-    )
+def _meets(fastest: float, duration: float) -> bool:
+    """Whether a path whose time-optimal motion takes ``fastest`` [s] can take ``duration``:
+    to rounding (1e-12 relative, as stage 1 slows a motion down to T; the free plan's own t_e
+    asked for came out 1.2e-15 below the time-optimal timing of its path)."""
+    return fastest <= duration * (1.0 + 1e-12)
+
+
+def _fastest_on(setup: Segment, path: Path) -> tuple[float, float]:
+    """t_e of the time-optimal timing of a path [s] on the plan's grid and on the grid stage 2
+    times its iterates on (that of ``SCPOptions.grid``, at least 4 segments per control point,
+    at most the plan's), inf where the grid cannot time the path (a moving start's first
+    segment too long to turn in)."""
+    grid, options = setup.grid, setup.options
+    iterate = grid
+    if setup.max_iterations > 0 and isinstance(options, SCPOptions):
+        count = options.control_points
+        if isinstance(path, BSplinePath):
+            count = path.control_points.shape[0] - 2
+        iterate = min(grid, max(options.grid, 4 * count))
+    elif setup.max_iterations > 0:
+        iterate = min(grid, getattr(options, "grid", grid))
+    found = {}
+    for g in {grid, iterate}:
+        try:
+            found[g] = optimal_timing(
+                setup.robot,
+                path,
+                grid=g,
+                velocity_limits=setup.velocity_limits,
+                qd0=setup.ends[0],
+                qde=setup.ends[1],
+            ).duration
+        except InfeasiblePathError:
+            found[g] = np.inf
+    return found[grid], found[iterate]
 
 
 def _setup(
