@@ -397,10 +397,11 @@ def _starts(
         done.append(_improve(setup, line, start, via_s, initial, callback, verbose))
         return done[0]
 
+    moving = any(v is not None for v in setup.ends)
     try:
         first, found = beside(
             here,
-            lambda: _heavier_path(setup),
+            (lambda: _heavier_run(setup)) if moving else (lambda: _heavier_path(setup)),
             lambda outcome: (
                 outcome[1] is not StopReason.INTERRUPTED and time.perf_counter() < setup.deadline
             ),
@@ -409,11 +410,6 @@ def _starts(
         )
         if found is None:
             return [first], first[3]
-        path, spent = found
-        spent += first[3] + 1
-        timed = _time_first_path(setup, path, path)
-        if timed.J >= first[0].J:  # the first run's basin, or a worse one: no second run
-            return [first], spent
         offset = len(first[4])  # its iterates numbered on from the first run's
 
         def follow(entry: Iteration) -> None:
@@ -423,6 +419,18 @@ def _starts(
             if callback is not None:
                 callback(moved)
 
+        if moving:  # the child's run, its plan timed here as the child's run timed it
+            path, reason, message, spent, entries = found
+            for entry in entries:  # (reported when it has ended)
+                follow(entry)
+            timed = _time_first_path(setup, path, path)
+            moved = [replace(entry, index=entry.index + offset) for entry in entries]
+            return [first, (timed, reason, message, spent, moved)], first[3] + spent + 1
+        path, spent = found
+        spent += first[3] + 1
+        timed = _time_first_path(setup, path, path)
+        if timed.J >= first[0].J:  # the first run's basin, or a worse one: no second run
+            return [first], spent
         second = _improve(setup, path, path, via_s, timed, follow, False)
         moved = [replace(entry, index=entry.index + offset) for entry in second[4]]
         second = (*second[:4], moved)
@@ -445,24 +453,46 @@ at the time limit itself, within an iteration) before it ends it."""
 
 def _continues(setup: Segment, start: Path | None) -> bool:
     """Whether :func:`_starts` runs the second start: stage 2 by SCP from the straight line
-    (no obstacles, via-points or moving ends), rest to rest, θe fixed, no duration, a torque cost
-    with some weight > 0 and ``SCPOptions.continuation`` > 1 (under jerk limits too: the phase
-    under them starts from the lower run's path)."""
+    (no obstacles or via-points; with moving ends, the line leaving along them, unless every
+    moving end nearly rests: :func:`_from_rest_plan` then plans from rest, second start and
+    all), θe fixed, no duration, a torque cost with some weight > 0 and
+    ``SCPOptions.continuation`` > 1 (under jerk limits too: the phase under them starts from the
+    lower run's path)."""
     options, cost = setup.options, setup.cost
+    moving = any(v is not None for v in setup.ends)
     return (
         setup.method == Method.SCP
         and isinstance(options, SCPOptions)
         and options.continuation > 1.0
         and isinstance(cost, TorqueCost)
         and bool(np.any(cost.torque_weights(setup.robot.n) > 0.0))
-        and start is None
+        and (start is None or (moving and not all(resting_ends(setup))))
         and setup.max_iterations > 0
         and setup.collisions is None
         and not setup.vias
         and setup.goal is None
         and setup.duration is None
-        and all(v is None for v in setup.ends)
     )
+
+
+def _heavier_run(
+    setup: Segment,
+) -> tuple[Path, StopReason, str, int, list[Iteration]] | None:
+    """With moving ends, the second start's whole run (in its child): stage 2 under the cost
+    itself from the path of :func:`_heavier_path`, whatever that path's J — from a moving
+    start it is timed above the first run's plan although stage 2 goes on from it to a lower
+    one (ur5 leaving at 1 rad/s along the line: 2.52 at t_e 1.93 s → 2.06, against the first
+    run's 2.51 at 0.71 s). Its plan's path, why it stopped, the message, the stage-1 solves
+    spent and its iterates; None where it fails."""
+    found = _heavier_path(setup)
+    if found is None:
+        return None
+    path, spent = found
+    try:
+        run = _improve(setup, path, path, (), _time_first_path(setup, path, path), None, False)
+    except NearoptError:
+        return None
+    return run[0].trajectory.path, run[1], run[2], spent + run[3] + 1, run[4]
 
 
 def _heavier_path(setup: Segment) -> tuple[BSplinePath, int] | None:
@@ -470,7 +500,10 @@ def _heavier_path(setup: Segment) -> tuple[BSplinePath, int] | None:
     ``SCPOptions.continuation``, coarse (half the control points, a 32-segment grid, no
     refinement, four times the first trust radius), as a B-spline of the plan's own knots (its
     control points on that path at their Greville abscissae), and the stage-1 solves spent;
-    None where it fails (KeyboardInterrupt where it was interrupted)."""
+    None where it fails (KeyboardInterrupt where it was interrupted). With moving ends, that
+    run is from rest to rest and its path's end legs are turned onto the velocities' rays
+    (:func:`~nearopt.planning.ends.turned_onto`): from the line leaving along them, the
+    heavier run stayed among the fast motions (ur5 leaving at 1 rad/s: t_e 0.72 s)."""
     options: SCPOptions = setup.options  # type: ignore[assignment]
     cost: TorqueCost = setup.cost  # type: ignore[assignment]
     k = options.control_points
@@ -486,17 +519,26 @@ def _heavier_path(setup: Segment) -> tuple[BSplinePath, int] | None:
     heavy = replace(
         setup, cost=TorqueCost(weights=weights), options=coarse, grid=min(setup.grid, 64)
     )
-    line = StraightPath(setup.q0, setup.qe)
+    moving = (setup.ends[0] is not None, setup.ends[1] is not None)
     try:
-        outcome = _improve(heavy, line, None, (), _time_first_path(heavy, line, None), None, False)
+        line = StraightPath(setup.q0, setup.qe)
+        heavy = replace(heavy, ends=(None, None))
+        first = _time_first_path(heavy, line, None)
+        outcome = _improve(heavy, line, None, (), first, None, False)
         if outcome[1] is StopReason.INTERRUPTED:  # (run here, on one core: the plan ends)
             raise KeyboardInterrupt
         found = outcome[0].trajectory.path
-        breaks = knot_breaks(options, k)
+        breaks = knot_breaks(options, k, moving)
         sigma = BSplinePath.greville(k + 2, breaks)
         points = found(sigma * found.s_end)
         points[[0, -1]] = setup.q0, setup.qe
-        return BSplinePath(points, breaks), outcome[3] + 1
+        path = BSplinePath(points, breaks)
+        if any(moving):  # its end legs back onto the velocities' rays
+            bounds = position_bounds(setup.robot, setup.position_limits)
+            if bounds[0] is None or bounds[1] is None:
+                bounds = (np.full(setup.robot.n, -np.inf), np.full(setup.robot.n, np.inf))
+            path = turned_onto(setup.robot, path, setup.ends, bounds)  # type: ignore[arg-type]
+        return path, outcome[3] + 1
     except NearoptError:
         return None
 
