@@ -149,6 +149,75 @@ def test_a_moving_start_is_no_costlier_than_the_same_request_slowed_down(seed: i
     assert free.J <= slowed.J * (1.0 + 5e-3)
 
 
+FREE_PLAN_MEETS = {  # (arm, θ, θ̇, goal) of a fuzz pass: a duration the plan without it meets
+    # stage 1 could not time the first path on one grid (moving ends fixed: SolverError)
+    "xarm7": (
+        [
+            -2.0954369851088503,
+            -1.2190312901069016,
+            -1.4140708216291178,
+            0.04109696869200346,
+            1.6346883555312186,
+            0.8528066607385881,
+            -0.5175143365829035,
+        ],
+        [
+            1.7903430727570888,
+            1.2922272775662687,
+            3.1399805444566122,
+            0.04246122293542203,
+            -0.3099930955178373,
+            0.7046426426636847,
+            -1.871540659886179,
+        ],
+        [
+            6.134889198848155,
+            -0.5439570410710965,
+            -4.300393964189033,
+            0.42059636685228585,
+            1.7030722635678277,
+            -1.0057011350467389,
+            0.4897875994127068,
+        ],
+    ),
+    # the plan without the duration came from its second start: stage 2's first run's was slower
+    "so101": (
+        [
+            -1.6317552831997713,
+            -1.0719698491031922,
+            0.20594794376179199,
+            0.023917801829427952,
+            0.7375566512427001,
+        ],
+        [
+            -9.999999998892845,
+            0.7799299353140366,
+            3.011336540770751,
+            -9.871459941452239,
+            -0.47207277890583116,
+        ],
+        [
+            -0.9166703034751527,
+            1.5086214278438446,
+            -1.227442600092463,
+            -1.2148958974730146,
+            1.5935290076272342,
+        ],
+    ),
+}
+
+
+@pytest.mark.parametrize("name", sorted(FREE_PLAN_MEETS))
+def test_a_duration_the_free_plan_meets_from_a_fast_state_is_planned(name: str) -> None:
+    robot = load(name)
+    q, qd, goal = (np.array(x) for x in FREE_PLAN_MEETS[name])
+    free = nearopt.plan(robot, q, goal, COST, qd0=qd)
+    result = nearopt.plan(robot, q, goal, COST, qd0=qd, max_duration=free.duration)
+    report = nearopt.verify_plan(result)  # (t_e against what was asked, too)
+    assert report.passed, str(report)
+    assert result.J <= free.J * (1.0 + 1e-9)  # the plan without it meets it: J no higher
+
+
 def test_bad_boundary_velocities_are_refused_naming_the_joint() -> None:
     robot, q, qd, q2 = moving_state("ur5", 3)
     names, limit = robot.joint_names, robot.limits.velocity

@@ -617,9 +617,12 @@ def _fast_enough(
         )
     quickest = np.inf
     for request in (replace(setup, cost=TimeCost(), duration=None), replace(setup, duration=None)):
-        try:  # the time-optimal plan's path; the plan's without the duration (a slower basin)
-            first = _time_first_path(request, line, start)
-            path = _improve(request, line, start, via_s, first, None, False)[0].trajectory.path
+        try:  # the time-optimal plan's path; the plan's without the duration, as plan makes it
+            if isinstance(request.cost, TimeCost):
+                first = _time_first_path(request, line, start)
+                path = _improve(request, line, start, via_s, first, None, False)[0].trajectory.path
+            else:
+                path = _planned(request, None, False)[1][0].trajectory.path
         except (InfeasiblePathError, SolverError):
             continue
         found = _fastest_on(setup, path)
@@ -729,7 +732,7 @@ def _fastest_on(setup: Segment, path: Path) -> tuple[float, float]:
                 qd0=setup.ends[0],
                 qde=setup.ends[1],
             ).duration
-        except InfeasiblePathError:
+        except (InfeasiblePathError, SolverError):  # (the limits between its samples too)
             found[g] = np.inf
     return found[grid], found[iterate]
 
