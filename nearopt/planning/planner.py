@@ -63,7 +63,7 @@ from .records import (
     Segment,
     StopReason,
 )
-from .scp import knot_breaks, sequential_convex
+from .scp import iterate_grid, knot_breaks, sequential_convex
 from .smooth import smooth_iterations
 from .start import first_path, position_bounds, resting_ends
 
@@ -608,9 +608,9 @@ def _fast_enough(
     if _meets(max(fastest), duration):
         return setup, line, start
     on_plan_grid = replace(setup, options=replace(setup.options, grid=setup.grid))
-    if setup.max_iterations == 0 or _meets(fastest[0], duration):
-        if _meets(fastest[0], duration):
-            return on_plan_grid, line, start
+    if _meets(fastest[0], duration):  # only on the plan's grid
+        return on_plan_grid, line, start
+    if setup.max_iterations == 0:
         raise InfeasiblePathError(
             f"{word} {duration:.9g} s is shorter than the time-optimal motion along the first "
             f"path, {max(fastest):.9g} s"
@@ -714,13 +714,11 @@ def _fastest_on(setup: Segment, path: Path) -> tuple[float, float]:
     segment too long to turn in)."""
     grid, options = setup.grid, setup.options
     iterate = grid
-    if setup.max_iterations > 0 and isinstance(options, SCPOptions):
+    if setup.max_iterations > 0 and isinstance(options, SCPOptions):  # (a duration's method)
         count = options.control_points
         if isinstance(path, BSplinePath):
             count = path.control_points.shape[0] - 2
-        iterate = min(grid, max(options.grid, 4 * count))
-    elif setup.max_iterations > 0:
-        iterate = min(grid, getattr(options, "grid", grid))
+        iterate = iterate_grid(grid, options, count)
     found = {}
     for g in {grid, iterate}:
         try:
@@ -1077,7 +1075,7 @@ def _smoothed(
     try:
         outcome = smooth_iterations(
             setup.robot, setup.cost, path,
-            grid=min(setup.grid, max(options.grid, 4 * count)),
+            grid=iterate_grid(setup.grid, options, count),
             velocity_limits=setup.velocity_limits, position_limits=setup.position_limits,
             options=options, collisions=setup.collisions, via=via_s,
             run=Run(left, setup.deadline, setup.t_start,
@@ -1289,7 +1287,7 @@ def _refined(
     misjudged = first.timing.J / history[-1].J - 1.0  # the plan's grid against the iterates'
     options: SCPOptions = common["options"]  # type: ignore[assignment]
     on_plan_grid = dict(common, options=replace(options, grid=setup.grid))
-    coarse = max(options.grid, 4 * count) < setup.grid  # the refined run's iterate grid
+    coarse = iterate_grid(setup.grid, options, count) < setup.grid  # the refined run's
     if misjudged > GRID_TRUST and coarse:
         common, coarse = on_plan_grid, False
 

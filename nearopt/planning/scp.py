@@ -89,6 +89,7 @@ __all__ = [
     "CollisionSamples",
     "path_through",
     "knot_breaks",
+    "iterate_grid",
     "through_vias",
     "onto_points",
 ]
@@ -173,7 +174,7 @@ def sequential_convex(
     n = robot.n
     start, k_count, breaks = _first_iterate(options, q0, qe, start)
     fixed = start.control_points[[0, -1]]
-    iterate_grid = min(grid, max(options.grid, 4 * k_count))  # ≥ 4 segments per control point
+    grid_of_iterates = iterate_grid(grid, options, k_count)
     scale, lower, upper = trust_scale(robot, q0, qe, k_count, goal is not None, position_limits)
     kept = MovingEnds(*ends, q0, qe, k_count - 1, goal is not None)
 
@@ -182,7 +183,7 @@ def sequential_convex(
         inner = p[: k_count * n].reshape(k_count, n)
         return BSplinePath(np.vstack([fixed[:1], inner, end]), breaks)
 
-    time_it = _timer(robot, cost, velocity_limits, path_of, iterate_grid, duration, ends)
+    time_it = _timer(robot, cost, velocity_limits, path_of, grid_of_iterates, duration, ends)
 
     p = start.control_points[1 : -1 if goal is None else None].ravel()
     timing = time_it(p)
@@ -242,9 +243,9 @@ def sequential_convex(
         if stop is not None:
             reason, message = StopReason.CONVERGED, stop
             break
-    if iterate_grid < grid:  # the returned path on the plan's own grid
+    if grid_of_iterates < grid:  # the returned path on the plan's own grid
         timing, message, timed = _on_plan_grid(
-            lambda: time_it(p, on=grid), timing, message, iterate_grid
+            lambda: time_it(p, on=grid), timing, message, grid_of_iterates
         )
         evaluations += timed
     return MethodOutcome(timing, reason, message, evaluations)
@@ -360,7 +361,7 @@ def _timer(
     cost: Cost,
     velocity_limits: bool,
     path_of: Callable[[NDArray[np.float64]], BSplinePath],
-    iterate_grid: int,
+    grid_of_iterates: int,
     duration: tuple[float, bool] | None = None,
     ends: tuple[NDArray[np.float64] | None, NDArray[np.float64] | None] = (None, None),
 ) -> Callable[..., TimingResult]:
@@ -373,7 +374,7 @@ def _timer(
         p: NDArray[np.float64],
         like: TimingResult | None = None,
         guess: NDArray[np.float64] | None = None,
-        on: int = iterate_grid,
+        on: int = grid_of_iterates,
     ) -> TimingResult:
         return optimal_timing(
             robot,
@@ -444,7 +445,7 @@ def trust_scale(
 
 
 def _on_plan_grid(
-    time_it: Callable[[], TimingResult], timing: TimingResult, message: str, iterate_grid: int
+    time_it: Callable[[], TimingResult], timing: TimingResult, message: str, grid_of_iterates: int
 ) -> tuple[TimingResult, str, int]:
     """The returned path timed on the plan's own grid (the iterate's timing kept, and said,
     where stage 1 fails there); the stage-1 solves spent."""
@@ -455,7 +456,7 @@ def _on_plan_grid(
             timing,
             message
             + (
-                f"; timed on the iterate grid ({iterate_grid} segments): on the plan's "
+                f"; timed on the iterate grid ({grid_of_iterates} segments): on the plan's "
                 f"grid stage 1 failed ({exc})"
             ),
             0,
@@ -609,6 +610,13 @@ that the predicted decrease the test and the trust region compare is exact enoug
 ACTIVATION = 0.05
 """Pairs farther than the margin plus this from each other get no row in the model [m]
 (TrajOpt's distance-check threshold)."""
+
+
+def iterate_grid(grid: int, options: SCPOptions, count: int) -> int:
+    """The grid stage 2 times its iterates on: ``options.grid``, at least 4 segments per
+    control point (``count`` interior ones: with fewer, the grid cannot see what one control
+    point changes), at most the plan's ``grid``."""
+    return min(grid, max(options.grid, 4 * count))
 
 
 def knot_breaks(
