@@ -103,9 +103,9 @@ def test_a_moving_start_under_a_duration_meets_it() -> None:
 @pytest.mark.parametrize("seed", [1, 2, 4])
 def test_a_duration_the_plan_without_it_meets_is_planned(seed: int) -> None:
     """so101 states 0.7 of the way through a plan, re-planned to a new goal under a duration of
-    1 and 1.05 times the t_e of the plan without it: all six were refused before (the first
-    path and the time-optimal plan's path too slow, or timed only on the plan's grid; T at the
-    free plan's own t_e 1.2e-15 below its path's time-optimal motion)."""
+    the t_e of the plan without it: all three were refused before (the first path and the
+    time-optimal plan's path too slow, or timed only on the plan's grid; T 1.2e-15 below the
+    time-optimal motion along the free plan's path)."""
     robot = load("so101")
     rng = np.random.default_rng(seed)
     lo, hi = robot.limits.position_lower, robot.limits.position_upper
@@ -115,21 +115,19 @@ def test_a_duration_the_plan_without_it_meets_is_planned(seed: int) -> None:
     before = nearopt.plan(robot, q0, q1, COST)
     q, qd = (x[0] for x in before.trajectory.states(np.array([0.7 * before.duration]))[:2])
     free = nearopt.plan(robot, q, q2, COST, qd0=qd)
-    for factor in (1.0, 1.05):
-        result = nearopt.plan(robot, q, q2, COST, qd0=qd, duration=factor * free.duration)
-        report = nearopt.verify_plan(result)
-        assert report.passed, str(report)
-        assert result.duration == pytest.approx(factor * free.duration, rel=1e-9)
-        if factor == 1.0:  # the plan without the duration meets it: J no higher
-            assert result.J <= free.J * (1.0 + 1e-9)
+    result = nearopt.plan(robot, q, q2, COST, qd0=qd, duration=free.duration)
+    report = nearopt.verify_plan(result)
+    assert report.passed, str(report)
+    assert result.duration == pytest.approx(free.duration, rel=1e-9)
+    assert result.J <= free.J * (1.0 + 1e-9)  # the plan without the duration meets it
 
 
-@pytest.mark.parametrize("seed", [0, 1])
+@pytest.mark.parametrize("seed", [0])
 def test_a_moving_start_is_no_costlier_than_the_same_request_slowed_down(seed: int) -> None:
     """ur5 motions (as ``bench_duration.py``'s) leaving q0 at 1 rad/s along the line: a duration
-    forced on the re-plan (the plan from rest's t_e, 2.5 times the fast motion's) cannot make it
-    cheaper. Without the second start for moving ends, the free re-plans stayed among the fast
-    motions: J 2.89 and 2.51 at t_e 1.70 and 0.71 s, against 2.35 and 2.06 under that duration."""
+    forced on the re-plan (the plan from rest's t_e) cannot make it cheaper. Without the second
+    start for moving ends, the free re-plans stayed among the fast motions: J 2.89 at t_e
+    1.70 s, against 2.35 under that duration (seed 1: 2.51 at 0.71 s against 2.06)."""
     robot = load("ur5")
     rng = np.random.default_rng(seed)
     lo, hi = (
@@ -145,7 +143,7 @@ def test_a_moving_start_is_no_costlier_than_the_same_request_slowed_down(seed: i
     for result in (free, slowed):
         report = nearopt.verify_plan(result)
         assert report.passed, str(report)
-    # two local runs in one basin end up to 0.13 % apart (seed 1); a missed basin is 11–22 %
+    # two local runs in one basin ended 0.13 % apart (seed 1); a missed basin is 11–22 %
     assert free.J <= slowed.J * (1.0 + 5e-3)
 
 
