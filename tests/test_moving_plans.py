@@ -216,6 +216,28 @@ def test_a_duration_the_free_plan_meets_from_a_fast_state_is_planned(name: str) 
     assert result.J <= free.J * (1.0 + 1e-9)  # the plan without it meets it: J no higher
 
 
+OWN_DURATION = (  # ur5, a state halfway through a time-optimal plan of a fuzz pass, a far goal
+    [0.18224071420657947, -0.48643284597799047, 0.7504887357563123, 1.5259557686106273,
+     0.5595362945463895, -0.38684029736262737],
+    [-1.4827590190056739, 1.9825472098194974, 2.660487384572783, -1.73826155948921,
+     1.1063239316129094, -3.1999999808403543],
+    [3.2017729423232133, -0.33805079484385026, -0.07407864554597232, -2.1992296048485835,
+     -1.164486508269106, 3.8533656984066003],
+)  # fmt: skip
+
+
+def test_a_time_optimal_plan_asked_for_its_own_duration_is_planned() -> None:
+    """The duration asked for is the time-optimal plan's own t_e: stage 1 timed its path again
+    1.5e-11 slower (it is solved to 1e-9) and the request was refused as too short."""
+    robot = load("ur5")
+    q, qd, goal = (np.array(x) for x in OWN_DURATION)
+    free = nearopt.plan(robot, q, goal, nearopt.TimeCost(), qd0=qd)
+    result = nearopt.plan(robot, q, goal, nearopt.TimeCost(), qd0=qd, duration=free.duration)
+    report = nearopt.verify_plan(result)  # (t_e against T to 1e-9 relative)
+    assert report.passed, str(report)
+    assert result.J <= free.J * (1.0 + 1e-9)
+
+
 def test_bad_boundary_velocities_are_refused_naming_the_joint() -> None:
     robot, q, qd, q2 = moving_state("ur5", 3)
     names, limit = robot.joint_names, robot.limits.velocity

@@ -55,6 +55,7 @@ from .conic import ConicSolution, is_solved, solve_conic
 from .discretisation import Discretisation, LinearRows, RowBlocks
 from .driver import TimingResult, optimal_timing
 from .duration import (
+    AS_FAST,
     DURATION_TOLERANCE,
     check_duration,
     duration_gradient,
@@ -130,6 +131,7 @@ __all__ = [
     "grid_knots",
     "solve_timing",
     "optimal_timing",
+    "AS_FAST",
     "DURATION_TOLERANCE",
     "check_duration",
     "duration_of",
