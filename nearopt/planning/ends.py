@@ -215,9 +215,14 @@ def _with_legs(
     anchors = {0: points[0], count - 1: points[-1]}
     for end, qd, step, room, qdd in moving:
         inner = 2 if end == 0 else count - 3
-        reach = min(legs[0 if end == 0 else 1], room)
-        points[inner] = points[end] + reach * step
-        points[(1 if end == 0 else count - 2)] = points[end] + 0.5 * reach * step
+        reach = legs[0 if end == 0 else 1]
+        # the first control point (the direction) on the ray within the room the position
+        # bounds leave along it; the second the whole leg out, each joint within its bounds: a
+        # joint moving slowly towards a limit close by turns back alone (a panda joint 9e-5 rad
+        # from its limit cut every leg to 0.037 rad, and the whole arm, moving at its speed
+        # limits, could not turn that sharply)
+        points[inner] = np.clip(points[end] + reach * step, lower, upper)
+        points[(1 if end == 0 else count - 2)] = points[end] + min(0.5 * reach, room) * step
         turn = _turning(BSplinePath(points, breaks), qd, end == 0, qdd)
         size = float(np.linalg.norm(turn))  # a bend sharper than the leg is long: the leg's
         if size > reach:  # (a slow end's curvature costs little; its θ̈ ⊥ θ' / b is noise)
