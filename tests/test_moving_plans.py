@@ -226,16 +226,43 @@ OWN_DURATION = (  # ur5, a state halfway through a time-optimal plan of a fuzz p
 )  # fmt: skip
 
 
-def test_a_time_optimal_plan_asked_for_its_own_duration_is_planned() -> None:
-    """The duration asked for is the time-optimal plan's own t_e: stage 1 timed its path again
-    1.5e-11 slower (it is solved to 1e-9) and the request was refused as too short."""
+@pytest.mark.parametrize("word", ["duration", "max_duration"])
+def test_a_time_optimal_plan_asked_for_its_own_duration_is_planned(word: str) -> None:
+    """The duration asked for (t_e = T, or t_e ≤ T) is the time-optimal plan's own t_e: stage 1
+    timed its path again 1.5e-11 slower (it is solved to 1e-9) and the request was refused as
+    too short."""
     robot = load("ur5")
     q, qd, goal = (np.array(x) for x in OWN_DURATION)
     free = nearopt.plan(robot, q, goal, nearopt.TimeCost(), qd0=qd)
-    result = nearopt.plan(robot, q, goal, nearopt.TimeCost(), qd0=qd, duration=free.duration)
-    report = nearopt.verify_plan(result)  # (t_e against T to 1e-9 relative)
+    result = nearopt.plan(robot, q, goal, nearopt.TimeCost(), qd0=qd, **{word: free.duration})
+    report = nearopt.verify_plan(result)  # (t_e against T: to 1e-9 relative, t_e ≤ T to 1e-12)
     assert report.passed, str(report)
     assert result.J <= free.J * (1.0 + 1e-9)
+
+
+AT_SPEED_LIMITS = (  # panda, 0.2 of the way through a plan: joints 3, 5 and 6 at their speed
+    # limits, joint 4 moving at 0.013 rad/s towards its lower limit 9e-5 rad away; the plan's goal
+    [-2.7164169243138945, -0.7536779953260881, -1.818389722186578, -3.0717082406720797,
+     1.0521367969307631, 1.7989671664981366, 0.9625417433354913],
+    [0.3067796022235942, 2.0756228804669505, 2.1749724244661692, -0.012909504936716946,
+     -2.6099667962876403, -2.609278175240247, 2.061126522171275],
+    [0.053975210399792584, 0.1445233425151622, 2.051043864417886, -2.730748806990217,
+     1.1852969087413654, 1.373586620907029, -2.529759935457423],
+)  # fmt: skip
+
+
+@pytest.mark.parametrize("back", [False, True])
+def test_an_arm_at_its_speed_limits_next_to_a_position_limit_is_replanned(back: bool) -> None:
+    """Every first path's leg along qd0 was cut to the 0.037 rad joint 4 leaves before its
+    limit, and the arm, moving at its speed limits, could not turn that sharply: refused for
+    every goal, its own (J 1.8964 on the rest of the old plan) and θ0 itself included."""
+    robot = load("panda")
+    q, qd, goal = (np.array(x) for x in AT_SPEED_LIMITS)
+    result = nearopt.plan(robot, q, q if back else goal, COST, qd0=qd)
+    report = nearopt.verify_plan(result)
+    assert report.passed, str(report)
+    if not back:  # no costlier than the rest of the plan it came from (J 2.71772 − 0.82130)
+        assert result.J <= 1.8964228 * (1.0 + 1e-6)
 
 
 def test_bad_boundary_velocities_are_refused_naming_the_joint() -> None:

@@ -241,7 +241,7 @@ def plan(
     if qd0 is not None or qde is not None:
         setup = replace(setup, ends=_check_ends(setup, qd0, qde))
     _check_moves(setup)
-    initial, outcome, via_s = _planned(setup, callback, verbose)
+    initial, outcome, via_s = _within_limit(setup, callback, verbose)
     timing, reason, message, evaluations, history = outcome
     if setup.robot.limits.smooth:  # stage 2 goes on under the jerk (torque-rate) limits
 
@@ -262,6 +262,31 @@ def plan(
 Outcome = tuple[TimingResult, StopReason, str, int, list[Iteration]]
 """A stage-2 run's outcome: the timing, why it stopped, the message, the stage-1 solves spent and
 the accepted iterates."""
+
+
+def _within_limit(
+    setup: Segment, callback: Callable[[Iteration], None] | None, verbose: bool
+) -> tuple[TimingResult, Outcome, tuple]:
+    """:func:`_planned`; under t_e ≤ T (``max_duration``) that stage 1 refuses, the plan
+    without the limit where its own t_e keeps it (an unconstrained optimum that meets the
+    limit is the constrained one): a ur5 time-optimal re-plan asked for its own t_e as
+    max_duration was refused, another solve of its path being 1.5e-11 slower (stage 1 is solved
+    to 1e-9, t_e ≤ T holds to 1e-12)."""
+    try:
+        return _planned(setup, callback, verbose)
+    except InfeasiblePathError as exc:
+        if setup.duration is None or setup.duration[1] or setup.max_iterations == 0:
+            raise
+        refused = exc
+    try:
+        free = _planned(replace(setup, duration=None), callback, verbose)
+    except (InfeasiblePathError, SolverError):
+        raise refused from None
+    if free[1][0].duration > setup.duration[0]:
+        raise refused
+    timing, reason, message, spent, history = free[1]
+    note = f"{message}; the plan without max_duration, whose t_e keeps it"
+    return free[0], (timing, reason, note, spent, history), free[2]
 
 
 def _planned(
