@@ -251,6 +251,29 @@ AT_SPEED_LIMITS = (  # panda, 0.2 of the way through a plan: joints 3, 5 and 6 a
 )  # fmt: skip
 
 
+NEXT_TO_A_LIMIT = (  # ur5, 0.3 of the way through a plan: wrist 2 at its speed limit, the elbow
+    # 0.12 rad/s towards its limit 0.002 rad away (0.08 rad along the ray); a far goal
+    [5.236678417478015, -0.864073442064669, 3.1395136487814868, -4.545362719006616,
+     2.401060986913365, -2.2472571498490725],
+    [0.5183237515727358, -3.051123640721653, 0.11697552101094202, 0.4018264924681351,
+     3.1999865824232026, 0.7155991031158662],
+    [-4.026256115073299, 4.362206193810788, 2.827433388231, 2.978181539151808,
+     5.654866776461628, 1.1666662881670784],
+)  # fmt: skip
+
+
+def test_a_ur5_next_to_a_position_limit_is_replanned_to_a_far_goal() -> None:
+    """Refused: no first path leaving along qd0 could be timed (its leg cut short by the
+    position limit, the torque of wrist 1 bound at σ = 0.01), although stopping at the old goal
+    and going on is a feasible motion (J 6.48)."""
+    robot = load("ur5")
+    q, qd, goal = (np.array(x) for x in NEXT_TO_A_LIMIT)
+    result = nearopt.plan(robot, q, goal, COST, qd0=qd)
+    report = nearopt.verify_plan(result)
+    assert report.passed, str(report)
+    assert result.J < 6.48
+
+
 @pytest.mark.parametrize("back", [False, True])
 def test_an_arm_at_its_speed_limits_next_to_a_position_limit_is_replanned(back: bool) -> None:
     """Every first path's leg along qd0 was cut to the 0.037 rad joint 4 leaves before its
