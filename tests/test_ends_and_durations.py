@@ -181,6 +181,9 @@ def test_bad_end_velocities_and_durations_are_named() -> None:
         assert "\n" not in message
         if words in ("points elsewhere", "goes the other way", "beyond its speed limit", "qd0"):
             assert any(joint in message for joint in names), message
+        if words == "shorter than the time-optimal":  # by how much the fastest misses T [s]
+            fastest = optimal_timing(robot, path).duration
+            assert caught.value.excess == pytest.approx(fastest - 1e-3, rel=1e-6)
     custom = nearopt.CallableCost(lambda q, qd, u: 1.0 + np.sum(u**2, axis=1))
     with pytest.raises(nearopt.ConfigurationError, match="a duration is kept for"):
         optimal_timing(robot, path, custom, duration=1.0)

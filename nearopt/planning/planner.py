@@ -267,16 +267,18 @@ the accepted iterates."""
 def _within_limit(
     setup: Segment, callback: Callable[[Iteration], None] | None, verbose: bool
 ) -> tuple[TimingResult, Outcome, tuple]:
-    """:func:`_planned`; under t_e ≤ T (``max_duration``) that stage 1 refuses, the plan
-    without the limit where its own t_e keeps it (an unconstrained optimum that meets the
-    limit is the constrained one): a ur5 time-optimal re-plan asked for its own t_e as
-    max_duration was refused, another solve of its path being 1.5e-11 slower (stage 1 is solved
-    to 1e-9, t_e ≤ T holds to 1e-12)."""
+    """:func:`_planned`; under t_e ≤ T (``max_duration``) that stage 1 refuses by no more than
+    its accuracy (:data:`~nearopt.timing.AS_FAST`), the plan without the limit where its own t_e
+    keeps it (an unconstrained optimum that meets the limit is the constrained one): a ur5
+    time-optimal re-plan asked for its own t_e as max_duration was refused, another solve of
+    its path being 1.5e-11 slower (stage 1 is solved to 1e-9, t_e ≤ T holds to 1e-12)."""
     try:
         return _planned(setup, callback, verbose)
     except InfeasiblePathError as exc:
-        if setup.duration is None or setup.duration[1] or setup.max_iterations == 0:
-            raise
+        limit = None if setup.duration is None or setup.duration[1] else setup.duration[0]
+        if limit is None or exc.excess is None or exc.excess > AS_FAST * limit:
+            raise  # (the fastest motion found is slower than T by more than stage 1's accuracy:
+            # the plan without the limit, no faster, would not keep it)
         refused = exc
     try:
         free = _planned(replace(setup, duration=None), callback, verbose)
@@ -658,7 +660,8 @@ def _fast_enough(
     found = "stage 2 timed no path" if quickest == np.inf else "along the fastest path stage 2"
     raise InfeasiblePathError(
         f"{word} {duration:.9g} s is shorter than the time-optimal motion along the first "
-        f"path ({fastest[0]:.9g} s) and {found} found ({quickest:.9g} s)"
+        f"path ({fastest[0]:.9g} s) and {found} found ({quickest:.9g} s)",
+        excess=min(fastest[0], quickest) - duration,
     )
 
 

@@ -332,7 +332,9 @@ def duration_gradient(problem: TimingProblem, b: NDArray[np.float64]) -> NDArray
 
 
 def _too_short(duration: float, fastest: float) -> InfeasiblePathError:
+    """The error of a duration below the path's fastest motion (``excess``: by how much [s])."""
     return InfeasiblePathError(
         f"duration {duration:.12g} s is shorter than the time-optimal motion along this path, "
-        f"{fastest:.12g} s: no timing within the limits is that fast"
+        f"{fastest:.12g} s: no timing within the limits is that fast",
+        excess=fastest - duration,
     )
