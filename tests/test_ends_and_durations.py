@@ -258,3 +258,57 @@ def _reference_within(problem, cost: nearopt.TorqueCost, duration: float):
         except nearopt.SolverError:
             continue
     return solve_timing(problem, cost, method=TimingMethod.SOCP, max_duration=duration * 1.000005)
+
+
+def test_a_time_optimal_plan_asked_for_its_own_duration_is_planned() -> None:
+    """z1, rest to rest, f0 = 1, t_e = T and t_e ≤ T at the plan's own t_e: stage 1 timed the
+    path again 6.1e-10 slower (it is solved to 1e-9) and t_e = T was refused as too short."""
+    robot = load("z1")
+    q0 = np.array(
+        [0.9738938241083765, 0.5036939383604526, -0.23568064172221126,
+         0.9752786454565794, 1.2744351658649562, 2.7354503343057215]
+    )  # fmt: skip
+    qe = np.array(
+        [2.575297693642027, 1.4969489966060514, -1.686492202917456,
+         -0.8998147012764067, -0.5214219833102249, 1.8377088446004737]
+    )  # fmt: skip
+    free = nearopt.plan(robot, q0, qe, nearopt.TimeCost())
+    for word in ("duration", "max_duration"):
+        result = nearopt.plan(robot, q0, qe, nearopt.TimeCost(), **{word: free.duration})
+        report = nearopt.verify_plan(result)  # t_e against T: to 1e-9, t_e ≤ T to 1e-12
+        assert report.passed, str(report)
+        assert result.J <= free.J * (1.0 + 1e-9)
+
+
+def test_a_max_duration_refused_by_stage_1s_accuracy_returns_the_plan_without_it(
+    monkeypatch: pytest.MonkeyPatch,
+) -> None:
+    """Where stage 1 refuses t_e ≤ T by no more than its accuracy (a ur5 re-plan asked for its
+    own t_e: 1.5e-11 s), the plan without the limit is returned if its t_e keeps it; a refusal
+    by more stands. (The refusal is forced here: the fuzz pass's case is planned directly now.)"""
+    import nearopt.planning.planner as planner
+
+    robot = load("ur5")
+    q0, qe = np.zeros(6), np.array([0.6, -0.4, 0.5, 0.3, -0.2, 0.4])
+    free = nearopt.plan(robot, q0, qe, nearopt.TimeCost())
+    planned = planner._planned
+
+    def refusing(excess: float):
+        def fake(setup, callback, verbose):  # noqa: ANN001, ANN202 - the planner's own
+            if setup.duration is not None:
+                raise nearopt.InfeasiblePathError("too short (forced)", excess=excess)
+            return planned(setup, callback, verbose)
+
+        return fake
+
+    monkeypatch.setattr(planner, "_planned", refusing(1e-11))
+    result = nearopt.plan(robot, q0, qe, nearopt.TimeCost(), max_duration=free.duration)
+    assert result.J == free.J
+    assert "the plan without max_duration" in result.message
+    assert nearopt.verify_plan(result).passed
+    monkeypatch.setattr(planner, "_planned", refusing(1e-6))
+    with pytest.raises(nearopt.InfeasiblePathError, match="forced"):
+        nearopt.plan(robot, q0, qe, nearopt.TimeCost(), max_duration=free.duration)
+    monkeypatch.setattr(planner, "_planned", refusing(1e-11))
+    with pytest.raises(nearopt.InfeasiblePathError, match="forced"):  # its t_e would not keep it
+        nearopt.plan(robot, q0, qe, nearopt.TimeCost(), max_duration=0.999 * free.duration)

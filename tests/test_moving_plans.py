@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from conftest import load
 from console import run_cli
+from urdfs import erd_urdf
 
 import nearopt
 from nearopt.export import json_text
@@ -226,16 +227,15 @@ OWN_DURATION = (  # ur5, a state halfway through a time-optimal plan of a fuzz p
 )  # fmt: skip
 
 
-@pytest.mark.parametrize("word", ["duration", "max_duration"])
-def test_a_time_optimal_plan_asked_for_its_own_duration_is_planned(word: str) -> None:
-    """The duration asked for (t_e = T, or t_e ≤ T) is the time-optimal plan's own t_e: stage 1
-    timed its path again 1.5e-11 slower (it is solved to 1e-9) and the request was refused as
-    too short."""
+def test_a_time_optimal_replan_asked_for_its_own_duration_is_planned() -> None:
+    """A duration at the time-optimal re-plan's own t_e: that plan came from its second start
+    (under 1 + 0.01 Σ (u/U)²), which the search for a path as fast as T did not run for f0 = 1
+    (only the one run), and the request was refused."""
     robot = load("ur5")
     q, qd, goal = (np.array(x) for x in OWN_DURATION)
     free = nearopt.plan(robot, q, goal, nearopt.TimeCost(), qd0=qd)
-    result = nearopt.plan(robot, q, goal, nearopt.TimeCost(), qd0=qd, **{word: free.duration})
-    report = nearopt.verify_plan(result)  # (t_e against T: to 1e-9 relative, t_e ≤ T to 1e-12)
+    result = nearopt.plan(robot, q, goal, nearopt.TimeCost(), qd0=qd, duration=free.duration)
+    report = nearopt.verify_plan(result)
     assert report.passed, str(report)
     assert result.J <= free.J * (1.0 + 1e-9)
 
@@ -286,6 +286,31 @@ def test_an_arm_at_its_speed_limits_next_to_a_position_limit_is_replanned(back: 
     assert report.passed, str(report)
     if not back:  # no costlier than the rest of the plan it came from (J 2.71772 − 0.82130)
         assert result.J <= 1.8964228 * (1.0 + 1e-6)
+
+
+BAXTER = (  # baxter's left arm (example-robot-data, tip left_wrist) 0.7 of the way through a
+    # time-optimal plan, and that plan's goal: the rest of the plan lasts 0.39798 s
+    [-0.36558555990534725, -0.843235457291007, -0.37861136457079014, 1.045665093009957,
+     -0.1966901841508852, -0.5953340536898755, -1.3084471929429469],
+    [-0.09774062572114844, -1.4999999996163276, 0.7379480097549704, -1.1975519066276088,
+     -3.1678024761294874, 0.05328124784815179, -1.9372789813302973],
+    [-0.3031568943208366, -1.428773149006171, -0.08994060308460927, 0.8009492661601527,
+     -1.0400497585549315, -0.5471744061212268, -1.3110556828623987],
+)  # fmt: skip
+
+
+def test_a_time_optimal_replan_to_its_own_goal_is_no_slower_than_the_rest_of_its_plan() -> None:
+    """Stage 2 under f0 = 1 from the first path leaving along qd0 stopped at t_e 0.4252 s (its
+    model ties between bang-bang motions); the second start under 1 + 0.01 Σ (u/U)² finds a
+    motion no slower than the rest of the plan the state came from."""
+    robot = nearopt.Robot.from_urdf(
+        erd_urdf("baxter_description/urdf/baxter.urdf"), tip="left_wrist"
+    )
+    q, qd, goal = (np.array(x) for x in BAXTER)
+    result = nearopt.plan(robot, q, goal, nearopt.TimeCost(), qd0=qd)
+    report = nearopt.verify_plan(result)
+    assert report.passed, str(report)
+    assert result.duration <= 0.39798
 
 
 def test_bad_boundary_velocities_are_refused_naming_the_joint() -> None:

@@ -397,6 +397,8 @@ def _lowest(setup: Segment, runs: list[Outcome], spent: int) -> Outcome:
     second = runs[1]
     factor = setup.options.continuation  # type: ignore[union-attr]
     note = f"{second[2]}; from the plan under {factor:g} times the torque weights"
+    if _time_optimal(setup):
+        note = f"{second[2]}; from the plan under f0 = 1 + {SOFTENED:g} Σ (u/U)²"
     return (second[0], second[1], note, spent, first[4] + second[4])
 
 
@@ -483,9 +485,9 @@ def _continues(setup: Segment, start: Path | None) -> bool:
     """Whether :func:`_starts` runs the second start: stage 2 by SCP from the straight line
     (no obstacles or via-points; with moving ends, the line leaving along them, unless every
     moving end nearly rests: :func:`_from_rest_plan` then plans from rest, second start and
-    all), θe fixed, no duration, a torque cost with some weight > 0 and
-    ``SCPOptions.continuation`` > 1 (under jerk limits too: the phase under them starts from the
-    lower run's path)."""
+    all), θe fixed, no duration, a torque cost with some weight > 0 (or, with moving ends, the
+    time-optimal cost: :func:`_heavier_run`) and ``SCPOptions.continuation`` > 1 (under jerk
+    limits too: the phase under them starts from the lower run's path)."""
     options, cost = setup.options, setup.cost
     moving = any(v is not None for v in setup.ends)
     return (
@@ -493,7 +495,7 @@ def _continues(setup: Segment, start: Path | None) -> bool:
         and isinstance(options, SCPOptions)
         and options.continuation > 1.0
         and isinstance(cost, TorqueCost)
-        and bool(np.any(cost.torque_weights(setup.robot.n) > 0.0))
+        and (moving or bool(np.any(cost.torque_weights(setup.robot.n) > 0.0)))
         and (start is None or (moving and not all(resting_ends(setup))))
         and setup.max_iterations > 0
         and setup.collisions is None
@@ -511,8 +513,11 @@ def _heavier_run(
     start it is timed above the first run's plan although stage 2 goes on from it to a lower
     one (ur5 leaving at 1 rad/s along the line: 2.52 at t_e 1.93 s → 2.06, against the first
     run's 2.51 at 0.71 s). Its plan's path, why it stopped, the message, the stage-1 solves
-    spent and its iterates; None where it fails."""
-    found = _heavier_path(setup)
+    spent and its iterates; None where it fails. For f0 = 1 (no torque weight to make heavier)
+    the run is stage 2 under :data:`SOFTENED` from the first path, then under f0 = 1 from its
+    path: a baxter arm re-planned time-optimally from 0.7 of its plan to the same goal stopped
+    at 0.4252 (the rest of the old plan lasts 0.3980 s) and now ends at 0.3974."""
+    found = _softened_path(setup) if _time_optimal(setup) else _heavier_path(setup)
     if found is None:
         return None
     path, spent = found
@@ -521,6 +526,38 @@ def _heavier_run(
     except NearoptError:
         return None
     return run[0].trajectory.path, run[1], run[2], spent + run[3] + 1, run[4]
+
+
+SOFTENED = 0.01
+"""The running cost 1 + SOFTENED · Σ (u_i/U_i)² (U_i: joint i's larger effort limit) of the second
+start of a time-optimal plan with moving ends (:func:`_heavier_run`). Under f0 = 1 stage 2's
+model ties between bang-bang motions, and from the first path leaving along qd0 it stopped in a
+poor optimum; the small torque term orders them. On the baxter re-plan of :func:`_heavier_run`,
+1.0 ended at 0.4246 (the run under it too slow), 0.1 at 0.3985, 0.01 at 0.3974."""
+
+
+def _time_optimal(setup: Segment) -> bool:
+    """Whether the plan's cost is f0 = 1 (a torque cost without weights)."""
+    cost = setup.cost
+    return isinstance(cost, TorqueCost) and not np.any(cost.torque_weights(setup.robot.n) > 0.0)
+
+
+def _softened_path(setup: Segment) -> tuple[Path, int] | None:
+    """The path of stage 2 under f0 = 1 + :data:`SOFTENED` Σ (u/U)² from the first path (a
+    whole plan's stage 2, in the second start's child), and the stage-1 solves spent; None where
+    it fails."""
+    lim = setup.robot.limits
+    effort = np.maximum(np.abs(lim.effort_lower), np.abs(lim.effort_upper))
+    soft = replace(setup, cost=TorqueCost(weights=SOFTENED / effort**2))
+    try:
+        line, start, via_s = first_path(soft)
+        initial = _time_first_path(soft, line, start)
+        run = _improve(soft, line, start, via_s, initial, None, False)
+    except NearoptError:
+        return None
+    if run[1] is StopReason.INTERRUPTED:
+        raise KeyboardInterrupt
+    return run[0].trajectory.path, run[3] + 1
 
 
 def _heavier_path(setup: Segment) -> tuple[BSplinePath, int] | None:
@@ -644,9 +681,11 @@ def _fast_enough(
             f"path, {max(fastest):.9g} s"
         )
     quickest = np.inf
-    for request in (replace(setup, cost=TimeCost(), duration=None), replace(setup, duration=None)):
-        try:  # the time-optimal plan's path; the plan's without the duration, as plan makes it
-            if isinstance(request.cost, TimeCost):
+    requests = (replace(setup, cost=TimeCost(), duration=None), replace(setup, duration=None))
+    for whole, request in zip((False, True), requests, strict=True):
+        try:  # the time-optimal run's path; the plan's without the duration, as plan makes it
+            # (for f0 = 1 too: its second start finds faster motions than the one run)
+            if not whole:
                 first = _time_first_path(request, line, start)
                 path = _improve(request, line, start, via_s, first, None, False)[0].trajectory.path
             else:
