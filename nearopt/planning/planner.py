@@ -45,6 +45,7 @@ from ..timing import (
     MAX_GRID,
     JerkTimingResult,
     TimingResult,
+    as_fast_as,
     check_duration,
     optimal_timing,
     time_with_jerk_limits,
@@ -396,9 +397,10 @@ def _lowest(setup: Segment, runs: list[Outcome], spent: int) -> Outcome:
         return (*first[:3], spent, first[4])
     second = runs[1]
     factor = setup.options.continuation  # type: ignore[union-attr]
-    note = f"{second[2]}; from the plan under {factor:g} times the torque weights"
+    under = f"{factor:g} times the torque weights"
     if _time_optimal(setup):
-        note = f"{second[2]}; from the plan under f0 = 1 + {SOFTENED:g} Σ (u/U)²"
+        under = f"f0 = 1 + {SOFTENED:g} Σ (u/U)²"
+    note = f"{second[2]}; from the plan under {under}"
     return (second[0], second[1], note, spent, first[4] + second[4])
 
 
@@ -773,8 +775,7 @@ def _meets(fastest: float, asked: tuple[float, bool]) -> bool:
     ``asked`` (T, exact): t_e = T to stage 1's accuracy (:data:`~nearopt.timing.AS_FAST`: the
     free plan's own t_e asked for came out 1.5e-11 above the time-optimal timing of another
     solve of its path), t_e ≤ T to rounding (1e-12 relative, as verify checks it; 1.2e-15 seen)."""
-    duration, exact = asked
-    return fastest <= duration * (1.0 + (AS_FAST if exact else 1e-12))
+    return as_fast_as(fastest, *asked)
 
 
 def _fastest_on(setup: Segment, path: Path) -> tuple[float, float]:

@@ -57,6 +57,7 @@ from .driver import TimingResult, optimal_timing
 from .duration import (
     AS_FAST,
     DURATION_TOLERANCE,
+    as_fast_as,
     check_duration,
     duration_gradient,
     duration_of,
@@ -133,6 +134,7 @@ __all__ = [
     "optimal_timing",
     "AS_FAST",
     "DURATION_TOLERANCE",
+    "as_fast_as",
     "check_duration",
     "duration_of",
     "duration_gradient",

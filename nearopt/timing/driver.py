@@ -17,7 +17,7 @@ from ..robot import check_robot
 from ..trajectory import MotionCost, Trajectory
 from .between import BetweenSamples, inherit_margins, tighten, uniform_slow_down
 from .discretisation import Discretisation
-from .duration import AS_FAST, check_duration, duration_of, solve_for_duration
+from .duration import as_fast_as, check_duration, duration_of, solve_for_duration
 from .problem import build_timing_problem, with_moving_ends
 from .solvers import TimingMethod, TimingSolution, TimingStatus, out_of_time, solve_timing
 
@@ -327,8 +327,7 @@ def _slowed_to(
     is asked for); b as it is where t_e ≤ T holds with room."""
     t_e = duration_of(problem, b)
     duration, exact = target
-    if t_e > duration * (1.0 + (AS_FAST if exact else 1e-12)):  # the fastest motion, slowed
-        # between its samples (t_e = T to stage 1's accuracy, t_e ≤ T to rounding)
+    if not as_fast_as(t_e, duration, exact):  # the fastest motion, slowed between its samples
         raise InfeasiblePathError(
             f"duration {duration:.9g} s is shorter than the time-optimal motion along this "
             f"path that holds the limits between its samples too, {t_e:.9g} s"

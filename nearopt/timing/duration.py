@@ -46,6 +46,7 @@ if TYPE_CHECKING:
 __all__ = [
     "AS_FAST",
     "DURATION_TOLERANCE",
+    "as_fast_as",
     "check_duration",
     "solve_for_duration",
     "duration_of",
@@ -68,6 +69,12 @@ Solve = Callable[
     ["TimingProblem", Cost, "NDArray[np.float64] | None", "NDArray[np.float64] | None", bool],
     TimingSolution,
 ]  # (problem, cost, guess, price, the kernel alone)
+
+
+def as_fast_as(fastest: float, duration: float, exact: bool) -> bool:
+    """Whether a time-optimal motion of ``fastest`` [s] meets the duration T = ``duration`` [s]
+    asked for: t_e = T (``exact``) to :data:`AS_FAST`, t_e ≤ T to :data:`ROUNDING`."""
+    return fastest <= duration * (1.0 + (AS_FAST if exact else ROUNDING))
 
 
 def check_duration(name: str, value: object) -> float | None:
@@ -120,7 +127,6 @@ def solve_for_duration(
             f"got {cost.describe() if hasattr(cost, 'describe') else type(cost).__name__}"
         )
     limit, duration = duration, duration * (1.0 - below)
-    slack = AS_FAST if exact else ROUNDING  # how far above T a time-optimal motion meets it
     n = problem.dof
     weights = cost.torque_weights(n)
     free = solve(problem, cost, guess, None, False)
@@ -129,7 +135,7 @@ def solve_for_duration(
         return free, cost
     if not np.any(weights > 0.0):  # f0 = 1: ties broken by the least Σ u²/U²
         if t_free > duration:
-            if t_free <= limit * (1.0 + slack):
+            if as_fast_as(t_free, limit, exact):
                 return free, cost
             raise _too_short(limit, t_free)
         effort = np.maximum(np.abs(problem.torque.lower), np.abs(problem.torque.upper))
@@ -140,7 +146,7 @@ def solve_for_duration(
         base = weights
         if t_free > duration:
             low = (0.0, *_at(problem, solve, TimeCost(), None))
-            if low[1] > limit * (1.0 + slack):
+            if not as_fast_as(low[1], limit, exact):
                 raise _too_short(limit, low[1])
             if low[1] >= duration * (1.0 - DURATION_TOLERANCE):
                 return low[2], TimeCost()
