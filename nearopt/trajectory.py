@@ -166,7 +166,9 @@ class Motion:
 
         Every segment of the timing (where the motion is smooth) gets a 7/15-point Gauss-Kronrod
         rule; intervals whose two estimates differ by more than their share of ``tolerance`` × |J|
-        are halved, up to 10 times.
+        are halved, up to 10 times, and no more once halving them no longer halves their
+        difference (rounding: a 33 µs so100 motion, its torques from accelerations of 1e5
+        rad/s², differed by 2e3 times the share at every level, and took 3·10⁶ evaluations).
 
         Parameters
         ----------
@@ -176,7 +178,7 @@ class Motion:
             Relative accuracy asked of the integral.
         """
         lo, hi = self.t[:-1], self.t[1:]
-        total = 0.0
+        total, before = 0.0, np.inf  # (the differences of the intervals halved last)
         for level in range(11):
             half = 0.5 * (hi - lo)
             # the right-continuous evaluation picks the segment each node lies in (nodes are
@@ -189,8 +191,10 @@ class Motion:
             scale = abs(total + np.sum(kronrod))
             bad = error > tolerance * max(scale, 1e-300) / max(1, lo.size)
             total += float(np.sum(kronrod[~bad]))
-            if not np.any(bad) or level == 10:
+            stalled = float(np.sum(error)) > 0.5 * before  # rounding, not the rule's error
+            if not np.any(bad) or level == 10 or stalled:
                 return total + float(np.sum(kronrod[bad]))
+            before = float(np.sum(error[bad]))
             mid = 0.5 * (lo[bad] + hi[bad])
             lo, hi = np.concatenate([lo[bad], mid]), np.concatenate([mid, hi[bad]])
         return total
