@@ -341,13 +341,10 @@ def _from_free_plan(
             path = plan_free[0].trajectory.path
             if time.perf_counter() >= setup.deadline:
                 break
-            found = _fastest_on(setup, path)
-            if not _meets(found[0], setup.duration):
+            run = _fitting(setup, _fastest_on(setup, path))
+            if run is None:
                 continue
             fits.append(plan_free)
-            run = setup  # on the plan's grid where only that times it as fast as T
-            if not _meets(found[1], setup.duration):
-                run = replace(setup, options=replace(setup.options, grid=setup.grid))
             initial = _time_first_path(run, path, path)
             second = _improve(run, path, path, via_s, initial, callback, verbose)
             spent += second[3]
@@ -672,11 +669,9 @@ def _fast_enough(
     duration, exact = setup.duration
     word = "duration" if exact else "max_duration"
     fastest = _fastest_on(setup, line)
-    if _meets(max(fastest), setup.duration):
-        return setup, line, start
-    on_plan_grid = replace(setup, options=replace(setup.options, grid=setup.grid))
-    if _meets(fastest[0], setup.duration):  # only on the plan's grid
-        return on_plan_grid, line, start
+    run = _fitting(setup, fastest)
+    if run is not None:
+        return run, line, start
     if setup.max_iterations == 0:
         raise InfeasiblePathError(
             f"{word} {duration:.9g} s is shorter than the time-optimal motion along the first "
@@ -696,8 +691,9 @@ def _fast_enough(
             continue
         found = _fastest_on(setup, path)
         quickest = min(quickest, found[0])
-        if _meets(found[0], setup.duration):
-            return (setup if _meets(found[1], setup.duration) else on_plan_grid), path, path
+        run = _fitting(setup, found)
+        if run is not None:
+            return run, path, path
     found = "stage 2 timed no path" if quickest == np.inf else "along the fastest path stage 2"
     raise InfeasiblePathError(
         f"{word} {duration:.9g} s is shorter than the time-optimal motion along the first "
@@ -768,6 +764,17 @@ def _check_moves(setup: Segment) -> None:
     raise ConfigurationError(
         "q0 equals qe: a zero-length motion has nothing to plan (the arm stays where it is)"
     )
+
+
+def _fitting(setup: Segment, fastest: tuple[float, float]) -> Segment | None:
+    """The request to improve a path under its duration whose time-optimal motions take
+    ``fastest`` [s] (:func:`_fastest_on`): as it is where both grids time it as fast as T, on
+    the plan's grid where only that one does, None where neither does."""
+    if not _meets(fastest[0], setup.duration):  # type: ignore[arg-type]
+        return None
+    if _meets(fastest[1], setup.duration):  # type: ignore[arg-type]
+        return setup
+    return replace(setup, options=replace(setup.options, grid=setup.grid))
 
 
 def _meets(fastest: float, asked: tuple[float, bool]) -> bool:
